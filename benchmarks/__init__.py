@@ -1,0 +1,1 @@
+"""Benchmarks: speed and statistical studies that print figures. Not run in CI (see README)."""
