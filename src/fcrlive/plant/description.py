@@ -134,8 +134,11 @@ def check_plant(plant: Plant) -> None:
     _check_unit(plant.grid.other, "grid.other")
 
 
-def plant_from_dict(d: dict[str, Any], where: str | None = None) -> Plant:
+def plant_from_dict(d: dict[str, Any], where: str | None = None, base: Plant | None = None) -> Plant:
     """Build a :class:`Plant` from a description dict (parsed TOML/JSON); ``where`` names the source.
+
+    The description's ``preset`` is the base it overrides; without one, ``base`` (default: the library
+    defaults, which are the paper's plant 1).
 
     Raises ConfigError naming the offending key for unknown keys, wrong types, bad values and an
     unknown preset.
@@ -146,7 +149,7 @@ def plant_from_dict(d: dict[str, Any], where: str | None = None) -> Plant:
         model = PlantModel.model_validate(d)
     except ValidationError as exc:
         raise ConfigError("; ".join(_describe(e) for e in exc.errors()), where=where) from None
-    base = Plant()
+    base = Plant() if base is None else base
     if model.preset is not None:
         try:
             base = preset(model.preset)
@@ -161,8 +164,9 @@ def plant_from_dict(d: dict[str, Any], where: str | None = None) -> Plant:
     return plant
 
 
-def load_plant(path: str | Path) -> Plant:
-    """Read a plant description TOML file (format in docs/plant-toml.md)."""
+def load_plant(path: str | Path, base: Plant | None = None) -> Plant:
+    """Read a plant description TOML file (format in docs/plant-toml.md); ``base`` as in
+    :func:`plant_from_dict`."""
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
@@ -174,7 +178,7 @@ def load_plant(path: str | Path) -> Plant:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"not valid TOML: {exc}", where=str(p)) from None
-    return plant_from_dict(data, where=str(p))
+    return plant_from_dict(data, where=str(p), base=base)
 
 
 def plant_to_dict(plant: Plant) -> dict[str, Any]:
