@@ -1,0 +1,631 @@
+"""Prediction-error OE and Box-Jenkins models: y = Σ_i B_i/F_i u_i + C/D e (MISO, shared noise model).
+
+Loss: V(θ) = (1/N) Σ ε², ε = (D/C)(y − Σ B_i/F_i u_i), zero initial conditions per experiment, summed
+over experiments. θ = [b_1, ..., b_nu, c, d, f_1, ..., f_nu] (the toolbox's order, A = 1).
+
+Search (what made the prototype robust on a hard closed-loop case, libraries.md):
+  1. initial values: a high-order ARX (whitening: its A ≈ D/C), Steiglitz-McBride for each B_i/F_i on
+     the ARX's noise-free simulated output (one start) and on the ARX-whitened data (second start),
+     then Hannan-Rissanen for C/D on the output residual of B/F;
+  2. Gauss-Newton with step halving; a step is rejected (halved) if it moves a root of F_i, C or D
+     onto/outside the unit circle or does not lower the loss;
+  3. Levenberg-Marquardt (same stability guard) when Gauss-Newton cannot descend;
+  4. multi-start when the first search stalls (not converged, or a loss clearly above the
+     high-order ARX's): the other initial value and perturbed ones; the lowest loss is kept.
+
+The Jacobian ∂ε/∂θ is analytic (filters of u, of the simulated outputs, of ε and of v; see ``_eval``).
+Covariance: Cov θ̂ = λ̂ (JᵀJ)⁻¹ at θ̂, λ̂ = Σε²/(N − p) (Gauss approximation, asymptotically exact when
+the model structure contains the true system and the data are informative).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.signal as sps
+
+from fcrlive.ident.arx import arx, per_input
+from fcrlive.ident.data import IdData
+from fcrlive.ident.errors import OrderError, TooFewSamplesError, UnstableModelError
+from fcrlive.ident.poly import EstimationReport, PolyModel
+
+_ROOT_MAX = 1.0 - 1e-7
+"""A polynomial counts as stable when all roots are inside this radius (strictly inside the circle)."""
+
+
+# ===================================================================== structure and evaluation
+@dataclass(frozen=True)
+class _Struct:
+    nb: tuple[int, ...]
+    nc: int
+    nd: int
+    nf: tuple[int, ...]
+    nk: tuple[int, ...]
+
+    @property
+    def nu(self) -> int:
+        return len(self.nb)
+
+    @property
+    def p(self) -> int:
+        return sum(self.nb) + self.nc + self.nd + sum(self.nf)
+
+    def b_sl(self, i: int) -> slice:
+        s = sum(self.nb[:i])
+        return slice(s, s + self.nb[i])
+
+    @property
+    def c_sl(self) -> slice:
+        s = sum(self.nb)
+        return slice(s, s + self.nc)
+
+    @property
+    def d_sl(self) -> slice:
+        s = sum(self.nb) + self.nc
+        return slice(s, s + self.nd)
+
+    def f_sl(self, i: int) -> slice:
+        s = sum(self.nb) + self.nc + self.nd + sum(self.nf[:i])
+        return slice(s, s + self.nf[i])
+
+    def polys(self, th: np.ndarray):
+        B = [np.concatenate((np.zeros(self.nk[i]), th[self.b_sl(i)])) for i in range(self.nu)]
+        F = [np.concatenate(([1.0], th[self.f_sl(i)])) for i in range(self.nu)]
+        C = np.concatenate(([1.0], th[self.c_sl]))
+        D = np.concatenate(([1.0], th[self.d_sl]))
+        return B, F, C, D
+
+    def pack(self, B, F, C, D) -> np.ndarray:
+        parts = [np.asarray(B[i])[self.nk[i]:self.nk[i] + self.nb[i]] for i in range(self.nu)]
+        parts += [np.asarray(C)[1:1 + self.nc], np.asarray(D)[1:1 + self.nd]]
+        parts += [np.asarray(F[i])[1:1 + self.nf[i]] for i in range(self.nu)]
+        return np.concatenate(parts).astype(float)
+
+
+def _max_root(p: np.ndarray) -> float:
+    if p.size <= 1:
+        return 0.0
+    if p.size == 2:
+        return abs(p[1])
+    if not np.all(np.isfinite(p)):
+        return np.inf
+    return float(np.max(np.abs(np.roots(p))))
+
+
+def _stable(st: _Struct, th: np.ndarray) -> bool:
+    _, F, C, D = st.polys(th)
+    return all(_max_root(p) < _ROOT_MAX for p in (*F, C, D))
+
+
+def _reflect(p: np.ndarray, shrink: float = 0.98) -> np.ndarray:
+    """Reflect roots outside the unit circle inside (r → 1/r̄), shrink roots on it to radius ``shrink``.
+
+    Reflection keeps |P(e^{jω})| up to a constant factor, so for C and D the noise spectrum shape is kept.
+    """
+    if p.size <= 1:
+        return p
+    r = np.roots(p)
+    a = np.abs(r)
+    if np.all(a < _ROOT_MAX):
+        return p
+    r = np.where(a > 1.0 + 1e-6, 1.0 / np.conj(r), r)
+    a = np.abs(r)
+    r = np.where(a >= _ROOT_MAX, r / a * shrink, r)
+    q = np.real(np.poly(r))
+    return q
+
+
+def _shifted(dst: np.ndarray, x: np.ndarray, lag: int, sign: float) -> None:
+    """dst[t] = sign·x[t − lag] with zeros before (the filters start from rest)."""
+    L = x.shape[0]
+    lag = min(lag, L)
+    dst[:lag] = 0.0
+    if sign > 0:
+        dst[lag:] = x[:L - lag]
+    else:
+        np.negative(x[:L - lag], out=dst[lag:])
+
+
+def _eval(st: _Struct, th: np.ndarray, segs, want_jac: bool):
+    """Prediction errors ε (N,) and, if asked, J = ∂ε/∂θ (N, p), experiments stacked.
+
+    ε = (D/C) v, v = y − Σ w_i, w_i = (B_i/F_i) u_i. Columns of J (all filters from rest):
+        ∂ε/∂b_{i,j} = −(D/(C F_i)) u_i(t − nk_i − j)
+        ∂ε/∂f_{i,k} = +(D/(C F_i)) w_i(t − k)
+        ∂ε/∂c_k     = −(1/C) ε(t − k)
+        ∂ε/∂d_k     = +(1/C) v(t − k)
+    """
+    B, F, C, D = st.polys(th)
+    noise = st.nc > 0 or st.nd > 0
+    n = sum(s[0].shape[0] for s in segs)
+    eps = np.empty(n)
+    J = np.empty((n, st.p), order="F") if want_jac else None
+    r = 0
+    for y, u in segs:
+        L = y.shape[0]
+        v = y.copy()
+        ws = []
+        for i in range(st.nu):
+            w = sps.lfilter(B[i], F[i], u[:, i])
+            v -= w
+            ws.append(w)
+        e = sps.lfilter(D, C, v) if noise else v
+        eps[r:r + L] = e
+        if want_jac:
+            for i in range(st.nu):
+                CF = np.convolve(C, F[i])
+                if st.nf[i]:
+                    xz = sps.lfilter(D, CF, np.column_stack((u[:, i], ws[i])), axis=0)
+                    x, z = xz[:, 0], xz[:, 1]
+                else:
+                    x = sps.lfilter(D, CF, u[:, i]) if noise else u[:, i]
+                s = st.b_sl(i).start
+                for j in range(st.nb[i]):
+                    _shifted(J[r:r + L, s + j], x, st.nk[i] + j, -1.0)
+                s = st.f_sl(i).start
+                for k in range(1, st.nf[i] + 1):
+                    _shifted(J[r:r + L, s + k - 1], z, k, 1.0)
+            if st.nc:
+                g = sps.lfilter([1.0], C, e)
+                for k in range(1, st.nc + 1):
+                    _shifted(J[r:r + L, st.c_sl.start + k - 1], g, k, -1.0)
+            if st.nd:
+                h = sps.lfilter([1.0], C, v)
+                for k in range(1, st.nd + 1):
+                    _shifted(J[r:r + L, st.d_sl.start + k - 1], h, k, 1.0)
+        r += L
+    return eps, J
+
+
+def _ls(X: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Least squares by column-scaled normal equations (fast; used for initial values and GN directions).
+
+    Falls back to an SVD solution when the scaled Gram matrix is not numerically positive definite.
+    """
+    scale = np.sqrt(np.einsum("ij,ij->j", X, X))
+    scale[scale == 0] = 1.0
+    G = (X.T @ X) / np.outer(scale, scale)
+    g = (X.T @ y) / scale
+    try:
+        c = sla.cho_factor(G, check_finite=False)
+        if np.min(np.abs(np.diag(c[0]))) < 1e-7:
+            raise np.linalg.LinAlgError
+        sol = sla.cho_solve(c, g, check_finite=False)
+    except (np.linalg.LinAlgError, sla.LinAlgError):
+        sol = np.linalg.lstsq(X / scale, y, rcond=None)[0]
+    return sol / scale
+
+
+# ===================================================================== search
+@dataclass(frozen=True)
+class _SearchResult:
+    theta: np.ndarray
+    ssr: float
+    iterations: int
+    converged: bool
+    stop_reason: str
+    algorithm: str
+
+
+def _gn_step(J: np.ndarray, eps: np.ndarray) -> np.ndarray:
+    """Gauss-Newton direction: least-squares solution of J δ ≈ −ε.
+
+    Scaled normal equations are accurate enough for a search direction (the step is checked on the
+    loss anyway); the covariance at the end uses a QR of J.
+    """
+    return _ls(J, -eps)
+
+
+def _search(st: _Struct, th0: np.ndarray, segs, maxiter: int = 100, tol: float = 1e-10) -> _SearchResult:
+    """Gauss-Newton with step halving and stability guard; Levenberg-Marquardt fallback."""
+    th = th0.copy()
+    eps, J = _eval(st, th, segs, True)
+    V = float(eps @ eps)
+    it = 0
+    algorithm = "gn"
+    reason = f"maximum number of iterations ({maxiter}) reached"
+    converged = False
+    use_lm = False
+    while it < maxiter:
+        it += 1
+        if not use_lm:
+            delta = _gn_step(J, eps)
+            pred = float(np.sum((J @ delta) ** 2))
+            if not np.all(np.isfinite(delta)):
+                use_lm = True
+                continue
+            if pred <= tol * V:
+                converged, reason = True, "predicted relative loss decrease below tolerance"
+                break
+            mu = 1.0
+            accepted = False
+            for _ in range(20):
+                cand = th + mu * delta
+                if _stable(st, cand):
+                    e2, _ = _eval(st, cand, segs, False)
+                    V2 = float(e2 @ e2)
+                    if V2 < V:
+                        accepted = True
+                        break
+                mu *= 0.5
+            if not accepted:
+                use_lm = True
+                algorithm = "gn+lm"
+                it -= 1
+                continue
+            rel = (V - V2) / V
+            th = cand
+            eps, J = _eval(st, th, segs, True)
+            V = V2
+            if rel <= tol and mu * np.linalg.norm(delta) <= 1e-8 * (1 + np.linalg.norm(th)):
+                converged, reason = True, "relative loss decrease and step below tolerance"
+                break
+        else:
+            res = _lm(st, th, eps, J, V, segs, maxiter - it + 1, tol)
+            th, V, k, converged, reason = res
+            it += k
+            eps, J = _eval(st, th, segs, True)
+            break
+    return _SearchResult(th, V, it, converged, reason, algorithm)
+
+
+def _lm(st, th, eps, J, V, segs, maxiter, tol):
+    """Levenberg-Marquardt (Marquardt diagonal scaling) with the same stability guard."""
+    H = J.T @ J
+    g = J.T @ eps
+    dg = np.diag(H).copy()
+    dg[dg == 0] = 1.0
+    lam = 1e-3
+    k = 0
+    while k < maxiter:
+        k += 1
+        try:
+            delta = -np.linalg.solve(H + lam * np.diag(dg), g)
+        except np.linalg.LinAlgError:
+            lam *= 10
+            continue
+        cand = th + delta
+        ok = _stable(st, cand)
+        if ok:
+            e2, _ = _eval(st, cand, segs, False)
+            V2 = float(e2 @ e2)
+            ok = V2 < V
+        if ok:
+            rel = (V - V2) / V
+            th, V = cand, V2
+            eps, J = _eval(st, th, segs, True)
+            H = J.T @ J
+            g = J.T @ eps
+            dg = np.diag(H).copy()
+            dg[dg == 0] = 1.0
+            lam = max(lam / 5, 1e-12)
+            if rel <= tol:
+                return th, V, k, True, "Levenberg-Marquardt: relative loss decrease below tolerance"
+        else:
+            lam *= 8
+            if lam > 1e12:
+                # no direction lowers the loss even with tiny steps: a (local) minimum to working accuracy
+                gn = float(np.abs(g).max() / np.sqrt(V + 1e-300))
+                return th, V, k, gn < 1e-6 * np.sqrt(np.diag(H).max()), (
+                    "Levenberg-Marquardt: no descent even with maximal damping"
+                )
+    return th, V, k, False, f"Levenberg-Marquardt: maximum number of iterations ({maxiter}) reached"
+
+
+# ===================================================================== initial values
+def _sm(segs_target, nb: int, nf: int, nk: int, iters: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """Steiglitz-McBride for y ≈ B/F u (SISO). ``segs_target`` = list of (u_seg, y_seg)."""
+    F = np.ones(1)
+    B = np.zeros(nk + nb)
+    p = nb + nf
+    for _ in range(iters if nf else 1):
+        rows = []
+        for us, ys in segs_target:
+            uf = sps.lfilter([1.0], F, us)
+            yf = sps.lfilter([1.0], F, ys)
+            L = ys.shape[0]
+            n0 = max(nf, nk + nb - 1)
+            if L - n0 <= 0:
+                continue
+            X = np.empty((L - n0, p + 1))
+            for k in range(1, nf + 1):
+                X[:, k - 1] = -yf[n0 - k:L - k]
+            for j in range(nb):
+                X[:, nf + j] = uf[n0 - nk - j:L - nk - j]
+            X[:, p] = yf[n0:]
+            rows.append(X)
+        X = np.vstack(rows)
+        sol = _ls(X[:, :p], X[:, p])
+        Fn = _reflect(np.concatenate(([1.0], sol[:nf])))
+        Bn = np.concatenate((np.zeros(nk), sol[nf:]))
+        done = Fn.size == F.size and np.max(np.abs(Fn - F)) < 1e-9
+        F, B = Fn, Bn
+        if done:
+            break
+    return B, F
+
+
+def _hannan_rissanen(v_segs, nc: int, nd: int, n_ar: int) -> tuple[np.ndarray, np.ndarray]:
+    """C, D of v = C/D e: long AR for ê, then least squares of v on past v and past ê."""
+    if nc == 0 and nd == 0:
+        return np.ones(1), np.ones(1)
+    ehat = []
+    rows = []
+    # long AR fitted on all experiments together
+    Xs = []
+    for v in v_segs:
+        L = v.shape[0]
+        if n_ar >= L:
+            continue
+        X = np.empty((L - n_ar, n_ar + 1))
+        for k in range(1, n_ar + 1):
+            X[:, k - 1] = -v[n_ar - k:L - k]
+        X[:, n_ar] = v[n_ar:]
+        Xs.append(X)
+    X = np.vstack(Xs)
+    a = _ls(X[:, :-1], X[:, -1])
+    Aar = np.concatenate(([1.0], a))
+    for v in v_segs:
+        ehat.append(sps.lfilter(Aar, [1.0], v))
+    m = max(nc, nd)
+    for v, e in zip(v_segs, ehat):
+        L = v.shape[0]
+        n0 = n_ar + m
+        if n0 >= L:
+            continue
+        X = np.empty((L - n0, nc + nd + 1))
+        for k in range(1, nc + 1):
+            X[:, k - 1] = e[n0 - k:L - k]
+        for k in range(1, nd + 1):
+            X[:, nc + k - 1] = -v[n0 - k:L - k]
+        X[:, -1] = v[n0:] - e[n0:]
+        rows.append(X)
+    X = np.vstack(rows)
+    sol = _ls(X[:, :-1], X[:, -1])
+    C = _reflect(np.concatenate(([1.0], sol[:nc])))
+    D = _reflect(np.concatenate(([1.0], sol[nc:])))
+    return C, D
+
+
+def _add_noise_model(st: _Struct, segs, Bs, Fs, n_ar: int) -> np.ndarray:
+    """θ from B_i/F_i plus Hannan-Rissanen C/D on the output residual v = y − Σ B_i/F_i u_i."""
+    v_segs = []
+    for y, u in segs:
+        v = y.copy()
+        for i in range(st.nu):
+            v -= sps.lfilter(Bs[i], Fs[i], u[:, i])
+        v_segs.append(v)
+    C, D = _hannan_rissanen(v_segs, st.nc, st.nd, n_ar)
+    return st.pack(Bs, Fs, C, D)
+
+
+def _start_simulated(st: _Struct, segs, ha: PolyModel, n_ar: int) -> np.ndarray:
+    """Start 1: Steiglitz-McBride of each B_i/F_i on the high-order ARX's noise-free output of u_i."""
+    Bs, Fs = [], []
+    for i in range(st.nu):
+        tgt = [(u[:, i], sps.lfilter(ha.b[i], ha.a, u[:, i])) for _, u in segs]
+        B, F = _sm(tgt, st.nb[i], st.nf[i], st.nk[i])
+        Bs.append(B)
+        Fs.append(F)
+    return _add_noise_model(st, segs, Bs, Fs, n_ar)
+
+
+def _start_whitened(st: _Struct, segs, ha: PolyModel, n_ar: int) -> np.ndarray:
+    """Start 2: Steiglitz-McBride on the ARX-whitened data (A_h y, A_h u); inputs in turn (backfitting)."""
+    nu = st.nu
+    wsegs = [(sps.lfilter(ha.a, [1.0], y), sps.lfilter(ha.a, [1.0], u, axis=0)) for y, u in segs]
+    Bs = [np.zeros(st.nk[i] + st.nb[i]) for i in range(nu)]
+    Fs = [np.ones(1) for _ in range(nu)]
+    for _sweep in range(2 if nu > 1 else 1):
+        for i in range(nu):
+            tgt = []
+            for yw, uw in wsegs:
+                t = yw.copy()
+                for j in range(nu):
+                    if j != i:
+                        t -= sps.lfilter(Bs[j], Fs[j], uw[:, j])
+                tgt.append((uw[:, i], t))
+            Bs[i], Fs[i] = _sm(tgt, st.nb[i], st.nf[i], st.nk[i])
+    return _add_noise_model(st, segs, Bs, Fs, n_ar)
+
+
+def _perturbed(st: _Struct, th: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A restart near ``th``: F_i, C and D roots moved radially (kept inside), B rescaled to keep DC."""
+    B, F, C, D = st.polys(th)
+
+    def move(p):
+        if p.size <= 1:
+            return p
+        r = np.roots(p)
+        rad = np.abs(r)
+        # scale the log-distance of every root to the unit circle by a random factor in [1/e, e]
+        dist = -np.log(np.maximum(1 - rad, 1e-6))
+        # one factor per polynomial keeps complex-conjugate pairs conjugate
+        dist *= np.exp(rng.uniform(-1.0, 1.0))
+        new_rad = np.clip(1 - np.exp(-dist), 0.0, 0.995)
+        r = np.where(rad > 0, r / np.where(rad > 0, rad, 1) * new_rad, r)
+        return np.real(np.poly(r))
+
+    F2, B2 = [], []
+    for i in range(st.nu):
+        Fi = move(F[i])
+        g_old = np.sum(F[i])
+        g_new = np.sum(Fi)
+        B2.append(B[i] * (g_new / g_old if g_old != 0 else 1.0))
+        F2.append(Fi)
+    return st.pack(B2, F2, move(C), move(D))
+
+
+# ===================================================================== public estimators
+def _check_orders(data: IdData, nb, nc, nd, nf, nk, method: str) -> _Struct:
+    nu = data.nu
+    nb = per_input(nb, nu, "nb")
+    nf = per_input(nf, nu, "nf")
+    nk = per_input(nk, nu, "nk")
+    nc, nd = int(nc), int(nd)
+    if nc < 0 or nd < 0:
+        raise OrderError(f"nc = {nc} and nd = {nd} must be non-negative")
+    for i, m in enumerate(nb):
+        if m < 1:
+            raise OrderError(
+                f"nb = {m} for input {data.input_names[i]!r}: {method} needs at least one B coefficient "
+                "per input (drop the input instead)"
+            )
+    st = _Struct(nb, nc, nd, nf, nk)
+    return st
+
+
+def _ordered_model(st: _Struct, th: np.ndarray, data: IdData, cov, lam, report) -> PolyModel:
+    B, F, C, D = st.polys(th)
+    return PolyModel(a=np.ones(1), b=tuple(B), c=C, d=D, f=tuple(F), nk=st.nk, Ts=data.Ts,
+                     noise_variance=lam, covariance=cov, input_names=data.input_names,
+                     output_name=data.output_name, report=report)
+
+
+def _from_init(st: _Struct, init: PolyModel) -> np.ndarray:
+    if init.na != 0:
+        raise OrderError(f"initial model has na = {init.na}; OE/BJ models have A = 1")
+    if init.nb != st.nb or init.nf != st.nf or init.nc != st.nc or init.nd != st.nd or init.nk != st.nk:
+        raise OrderError(
+            f"initial model orders nb={init.nb} nc={init.nc} nd={init.nd} nf={init.nf} nk={init.nk} differ "
+            f"from nb={st.nb} nc={st.nc} nd={st.nd} nf={st.nf} nk={st.nk}"
+        )
+    B, F, C, D = list(init.b), list(init.f), init.c, init.d
+    names = [*(f"F_{i + 1}" for i in range(st.nu)), "C", "D"]
+    polys = [*F, C, D]
+    fixed = []
+    for name, p in zip(names, polys):
+        if not np.all(np.isfinite(p)):
+            raise UnstableModelError(f"initial {name} = {p} has non-finite coefficients")
+        if p.size > 1:
+            r = np.abs(np.roots(p))
+            if np.any(np.abs(r - 1.0) <= 1e-6):
+                raise UnstableModelError(
+                    f"initial {name} has a root on the unit circle (|z| = {r.max():.6f}, e.g. an "
+                    "integrator): it cannot be stabilised by reflection; give a stable initial model"
+                )
+        fixed.append(_reflect(p))
+    F = fixed[:st.nu]
+    C, D = fixed[st.nu], fixed[st.nu + 1]
+    return st.pack(B, F, C, D)
+
+
+def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, multistart: bool | str,
+         n_high: int | None, maxiter: int, tol: float, seed: int) -> PolyModel:
+    data.require_finite()
+    data.require_exciting()
+    n = data.N
+    if n <= st.p + 1:
+        raise TooFewSamplesError(
+            f"{n} samples for {st.p} parameters of {method.upper()}(nb={list(st.nb)}, nc={st.nc}, "
+            f"nd={st.nd}, nf={list(st.nf)}, nk={list(st.nk)})",
+            where=f"output {data.output_name!r}",
+        )
+    segs = list(data.segments())
+    lmin = min(data.lengths)
+    if n_high is None:
+        # long enough to whiten slow noise and capture slow poles, short enough for the data
+        n_high = int(np.clip(n // (40 * (data.nu + 1)), 4, 30))
+    n_high = int(min(n_high, max(1, (n - 1) // (2 * (data.nu + 1)) - 1), max(1, lmin // 3)))
+    arx_loss = np.nan
+    n_ar = int(min(n_high, max(2, lmin // 4)))
+    lazy = []
+    if init is not None:
+        starts = [_from_init(st, init)]
+    else:
+        ha = arx(data, max(n_high, max(st.nf) + max(st.nb), 2), max(n_high, max(st.nb) + 1), st.nk)
+        arx_loss = ha.report.loss
+        starts = [_start_simulated(st, segs, ha, n_ar)]
+        lazy.append(lambda: _start_whitened(st, segs, ha, n_ar))
+    if not np.all(np.isfinite(starts[0])) or not _stable(st, starts[0]):
+        raise UnstableModelError(f"initial {method.upper()} model could not be stabilised")
+    results: list[_SearchResult] = [_search(st, starts[0], segs, maxiter, tol)]
+    best = results[0]
+
+    def stalled(r: _SearchResult) -> bool:
+        if not r.converged:
+            return True
+        # the high-order ARX's loss is a near lower bound of the achievable innovation variance:
+        # a BJ/OE loss clearly above it means a local minimum (or a too-low model order)
+        return bool(np.isfinite(arx_loss) and method == "bj" and r.ssr / n > arx_loss * 1.02)
+
+    if multistart is True or (multistart == "auto" and stalled(best)):
+        rng = np.random.default_rng(seed)
+        extra = [*lazy, *(lambda: _perturbed(st, best.theta, rng) for _ in range(3))]
+        for make in extra:
+            s = make()
+            if not (np.all(np.isfinite(s)) and _stable(st, s)):
+                continue
+            r = _search(st, s, segs, maxiter, tol)
+            results.append(r)
+            if r.ssr < best.ssr:
+                best = r
+            if multistart == "auto" and not stalled(best) and len(results) >= 2:
+                break
+    th = best.theta
+    eps, J = _eval(st, th, segs, True)
+    ssr = float(eps @ eps)
+    lam = ssr / (n - st.p)
+    cov = _covariance(J, lam)
+    rep = EstimationReport(
+        method=method, n_samples=n, loss=ssr / n, iterations=best.iterations, converged=best.converged,
+        stop_reason=best.stop_reason, algorithm=best.algorithm,
+        start_losses=tuple(r.ssr / n for r in results),
+    )
+    return _ordered_model(st, th, data, cov, lam, rep)
+
+
+def _covariance(J: np.ndarray, lam: float) -> np.ndarray:
+    """λ̂ (JᵀJ)⁻¹ through a column-scaled QR of J (pseudo-inverse if J is rank deficient)."""
+    scale = np.sqrt(np.einsum("ij,ij->j", J, J))
+    scale[scale == 0] = 1.0
+    R = np.linalg.qr(J / scale, mode="r")
+    p = R.shape[1]
+    try:
+        Ri = sla.solve_triangular(R, np.eye(p), check_finite=False)
+        if not np.all(np.isfinite(Ri)):
+            raise sla.LinAlgError
+        inv = Ri @ Ri.T
+    except sla.LinAlgError:
+        inv = np.linalg.pinv(R.T @ R)
+    return lam * inv / np.outer(scale, scale)
+
+
+def bj(data: IdData, nb: int | Sequence[int], nc: int, nd: int, nf: int | Sequence[int],
+       nk: int | Sequence[int] = 1, *, init: PolyModel | None = None, multistart: bool | str = "auto",
+       n_high: int | None = None, maxiter: int = 100, tol: float = 1e-10, seed: int = 0) -> PolyModel:
+    """Box-Jenkins model y = Σ B_i/F_i u_i + C/D e by prediction-error minimisation.
+
+    Args:
+        data: IdData (one or several experiments, finite samples, every input exciting).
+        nb, nf, nk: per input (or one int for all): number of B coefficients, order of F, delay [samples].
+        nc, nd: orders of the shared noise model C/D.
+        init: initial model (same orders, A = 1); roots outside the unit circle are reflected inside.
+        multistart: "auto" (restart when the first search stalls), True (always try every start),
+            False (one start).
+        n_high: order of the high-order ARX used for initial values (default from N, at most 30).
+        maxiter, tol: iteration limit and relative loss tolerance of the search.
+        seed: seed of the perturbed restarts (the result is deterministic for a given seed).
+
+    Returns:
+        PolyModel with covariance λ̂(JᵀJ)⁻¹ and a report (iterations, loss, stop reason, start losses).
+    """
+    st = _check_orders(data, nb, nc, nd, nf, nk, "bj")
+    return _pem(data, st, "bj", init=init, multistart=multistart, n_high=n_high, maxiter=maxiter, tol=tol,
+                seed=seed)
+
+
+def oe(data: IdData, nb: int | Sequence[int], nf: int | Sequence[int], nk: int | Sequence[int] = 1, *,
+       init: PolyModel | None = None, multistart: bool | str = "auto", n_high: int | None = None,
+       maxiter: int = 100, tol: float = 1e-10, seed: int = 0) -> PolyModel:
+    """Output-error model y = Σ B_i/F_i u_i + e (a BJ model with C = D = 1). Arguments as :func:`bj`.
+
+    The covariance λ̂(JᵀJ)⁻¹ assumes white output noise; with coloured noise OE stays consistent in
+    open loop but that covariance is not the true one (use bj for honest bands).
+    """
+    st = _check_orders(data, nb, 0, 0, nf, nk, "oe")
+    return _pem(data, st, "oe", init=init, multistart=multistart, n_high=n_high, maxiter=maxiter, tol=tol,
+                seed=seed)
