@@ -1,0 +1,278 @@
+"""MQTT payloads (pydantic models), the topic tree, and the generator of docs/mqtt.md.
+
+Every topic lives under ``<base_topic>/<unit>/`` (``fcrlive/G1/...``). Times are UNIX seconds (UTC)
+as floats plus an ISO 8601 copy for humans. ``python -m fcrlive.daemon.payloads docs/mqtt.md``
+rewrites the documentation from the models below, so the JSON Schemas in the docs never drift.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+def iso(t: float) -> str:
+    """UNIX time [s] → ISO 8601 UTC with milliseconds."""
+    return datetime.fromtimestamp(t, UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+class _Payload(BaseModel):
+    # JSON has no NaN: pydantic writes NaN/inf as null (ser_json_inf_nan="null", said explicitly)
+    model_config = ConfigDict(extra="forbid", ser_json_inf_nan="null")
+
+
+class Window(_Payload):
+    """The analysed stretch of data."""
+
+    start: float = Field(description="window start [UNIX s]")
+    end: float = Field(description="window end [UNIX s]")
+    start_iso: str
+    end_iso: str
+
+    @classmethod
+    def of(cls, t1: float, t2: float) -> Window:
+        return cls(start=t1, end=t2, start_iso=iso(t1), end_iso=iso(t2))
+
+
+class DataQuality(_Payload):
+    """How good the window's data was."""
+
+    ok_fraction: float = Field(ge=0, le=1, description="fraction of expected samples with quality ok")
+    samples: int = Field(ge=0, description="rows stored in the window")
+    expected: int = Field(ge=0, description="samples expected at the configured rate")
+    counts: dict[str, int] = Field(description="samples per quality flag (ok, stale, missing, ...)")
+    gaps: int = Field(ge=0, description="number of stretches without good samples")
+    gap_s: float = Field(ge=0, description="total length of those stretches [s]")
+
+
+class ResultPayload(_Payload):
+    """``result/latest``: the whole outcome of one identification run (retained)."""
+
+    unit: str
+    t: float = Field(description="when the run finished [UNIX s]")
+    t_iso: str
+    window: Window
+    method: str
+    ok: bool = Field(description="false when the run was skipped or failed (see error)")
+    error: str | None = None
+    duration_s: float = Field(description="wall time of the identification [s]")
+    quality: DataQuality
+    result: dict[str, Any] | None = Field(description="the identification plug-in's JSON (to_json())")
+
+
+class ScalarPayload(_Payload):
+    """``droop``, ``max_abs_s``: one estimated number with its uncertainty (retained)."""
+
+    t: float = Field(description="when the estimate was made [UNIX s]")
+    window_end: float = Field(description="end of the data window it is based on [UNIX s]")
+    value: float | None
+    std: float | None = Field(None, description="standard deviation of the estimate (same unit)")
+    unit: str = ""
+
+
+class TsoVerdictPayload(_Payload):
+    """``tso/<product>`` (fcrn, fcrd_up, fcrd_down): the Nordic TR v1.1 checks on the identified model."""
+
+    t: float
+    window_end: float
+    product: Literal["fcrn", "fcrd_up", "fcrd_down"]
+    verdict: Literal["pass", "fail", "unknown"]
+    details: dict[str, Any] = Field(default_factory=dict,
+                                    description="margins etc. as given by the analysis plug-in")
+
+
+class GpPayload(_Payload):
+    """``gp``: the identified closed-loop power response G_p(jω) at the TSO periods (retained)."""
+
+    t: float
+    window_end: float
+    periods_s: list[float]
+    gain: list[float | None] = Field(description="|G_p| [pu/pu]")
+    phase_deg: list[float | None] = Field(description="arg G_p [deg]")
+
+
+class SignalStats(_Payload):
+    """Statistics of one signal over the statistics interval (good samples only)."""
+
+    mean: float | None
+    std: float | None
+    min: float | None
+    max: float | None
+
+
+class LiveStatsPayload(_Payload):
+    """``live``: low-rate statistics of the raw signals, every ``stats_interval_s`` (not retained)."""
+
+    t: float
+    interval_s: float = Field(description="length of the interval the statistics cover [s]")
+    samples: int
+    rate_hz: float = Field(description="samples per second actually stored")
+    quality: dict[str, int] = Field(description="samples per quality flag in the interval")
+    missed_ticks: int
+    signals: dict[str, SignalStats]
+
+
+@dataclass(frozen=True)
+class Topic:
+    """One entry of the topic tree (``suffix`` is relative to ``<base>/<unit>/``)."""
+
+    suffix: str
+    model: type[BaseModel] | None
+    retained: bool
+    qos: int
+    doc: str
+
+
+TOPICS: tuple[Topic, ...] = (
+    Topic("status", None, True, 1,
+          'plain text "online" (birth, on connect) / "offline" (will, and on clean shutdown)'),
+    Topic("result/latest", ResultPayload, True, 1, "the latest identification run, complete"),
+    Topic("droop", ScalarPayload, True, 1, "estimated droop ρ [%] (key `droop` of the result)"),
+    Topic("max_abs_s", ScalarPayload, True, 1, "peak sensitivity max|S| (key `max_abs_s`)"),
+    Topic("tso/fcrn", TsoVerdictPayload, True, 1, "FCR-N verdict (key `tso.fcrn`)"),
+    Topic("tso/fcrd_up", TsoVerdictPayload, True, 1, "FCR-D upwards verdict (key `tso.fcrd_up`)"),
+    Topic("tso/fcrd_down", TsoVerdictPayload, True, 1, "FCR-D downwards verdict (key `tso.fcrd_down`)"),
+    Topic("gp", GpPayload, True, 1, "G_p(jω) at the TSO periods (key `gp`)"),
+    Topic("quality", DataQuality, True, 1, "data quality of the latest analysed window"),
+    Topic("live", LiveStatsPayload, False, 0, "signal statistics every stats_interval_s"),
+)
+
+
+def _num(x: Any) -> float | None:
+    try:
+        f = float(x)
+    except (TypeError, ValueError):
+        return None
+    return f if math.isfinite(f) else None
+
+
+def _scalar(x: Any, t: float, t2: float, unit: str) -> ScalarPayload | None:
+    if isinstance(x, dict):
+        return ScalarPayload(t=t, window_end=t2, value=_num(x.get("value")), std=_num(x.get("std")),
+                             unit=str(x.get("unit", unit)))
+    v = _num(x)
+    return None if v is None and x is None else ScalarPayload(t=t, window_end=t2, value=v, unit=unit)
+
+
+def result_topics(res: ResultPayload) -> dict[str, BaseModel]:
+    """Split a result into its topics: ``result/latest``, ``quality`` and, when the plug-in's JSON
+    has them, ``droop``, ``max_abs_s``, ``tso/<product>``, ``gp``. Unknown keys stay in
+    ``result/latest`` only; missing keys publish nothing (the previous retained value stays)."""
+    out: dict[str, BaseModel] = {"result/latest": res, "quality": res.quality}
+    r = res.result or {}
+    t, t2 = res.t, res.window.end
+    if "droop" in r and (p := _scalar(r["droop"], t, t2, "%")):
+        out["droop"] = p
+    if "max_abs_s" in r and (p := _scalar(r["max_abs_s"], t, t2, "")):
+        out["max_abs_s"] = p
+    for product, v in (r.get("tso") or {}).items():
+        if product in ("fcrn", "fcrd_up", "fcrd_down"):
+            if isinstance(v, dict):
+                passed = v.get("passed", v.get("pass"))
+                details = {k: val for k, val in v.items() if k not in ("passed", "pass")}
+            else:
+                passed, details = v, {}
+            verdict = "unknown" if passed is None else ("pass" if passed else "fail")
+            out[f"tso/{product}"] = TsoVerdictPayload(t=t, window_end=t2, product=product, verdict=verdict,
+                                                      details=details)
+    gp = r.get("gp")
+    if isinstance(gp, dict) and "periods_s" in gp:
+        out["gp"] = GpPayload(t=t, window_end=t2, periods_s=[float(p) for p in gp["periods_s"]],
+                              gain=[_num(g) for g in gp.get("gain", [])],
+                              phase_deg=[_num(g) for g in gp.get("phase_deg", [])])
+    return out
+
+
+def to_bytes(payload: BaseModel | str) -> bytes:
+    """Wire form: compact JSON for models, UTF-8 for plain strings."""
+    return payload.encode() if isinstance(payload, str) else payload.model_dump_json().encode()
+
+
+def json_schemas() -> dict[str, dict]:
+    """JSON Schema of each model-carrying topic, keyed by topic suffix."""
+    return {t.suffix: t.model.model_json_schema() for t in TOPICS if t.model is not None}
+
+
+def render_docs() -> str:
+    """docs/mqtt.md, generated from :data:`TOPICS` and the models."""
+    lines = [
+        "# fcrlive MQTT interface",
+        "",
+        "<!-- Generated by `python -m fcrlive.daemon.payloads docs/mqtt.md`; edit payloads.py, not this"
+        " file. -->",
+        "",
+        "All topics live under `<base_topic>/<unit>/` (config `[mqtt] base_topic`, default `fcrlive`, and",
+        "`[unit] name`), e.g. `fcrlive/G1/droop`. Payloads are compact JSON (UTF-8) except `status`.",
+        "Times are UNIX seconds (UTC, float); `*_iso` fields repeat them in ISO 8601. JSON has no NaN:",
+        "unavailable numbers are `null`.",
+        "",
+        "Retained topics always hold the latest value, so a dashboard that subscribes later gets the",
+        "state at once. While the broker is unreachable the daemon keeps the newest message per",
+        "retained topic (and a bounded queue of the others) and delivers them when it reconnects.",
+        "",
+        "## Topic tree",
+        "",
+        "| topic | retained | QoS | payload | content |",
+        "|---|---|---|---|---|",
+    ]
+    for t in TOPICS:
+        lines.append(f"| `<base>/<unit>/{t.suffix}` | {'yes' if t.retained else 'no'} | {t.qos} | "
+                     f"{t.model.__name__ if t.model else 'text'} | {t.doc} |")
+    lines += [
+        "",
+        "`status` is the availability topic: the client connects with a retained last will",
+        '"offline" and publishes a retained "online" right after connecting; a clean shutdown',
+        'publishes "offline" itself.',
+        "",
+        "## Mapping from the identification result",
+        "",
+        "The identification plug-in returns a JSON object (its `to_json()`), published whole in",
+        "`result/latest.result`. These keys, when present, also get their own topics:",
+        "",
+        "| key | form | topic |",
+        "|---|---|---|",
+        "| `droop` | number or `{value, std, unit}` | `droop` |",
+        "| `max_abs_s` | number or `{value, std}` | `max_abs_s` |",
+        "| `tso.fcrn`, `tso.fcrd_up`, `tso.fcrd_down` | bool or `{passed, ...details}` | `tso/<product>` |",
+        "| `gp` | `{periods_s: [...], gain: [...], phase_deg: [...]}` | `gp` |",
+        "",
+        "## Home Assistant discovery",
+        "",
+        "With `[mqtt] homeassistant_discovery = true` the daemon publishes retained sensor configs to",
+        "`<discovery_prefix>/sensor/fcrlive_<unit>_<key>/config` (droop, max_abs_s, data quality, live",
+        "power and frequency, FCR-N/FCR-D verdicts), with `availability_topic` = the status topic, and",
+        "announces them again whenever `<discovery_prefix>/status` says `online` (Home Assistant",
+        "restarted).",
+        "",
+        "## JSON Schemas",
+        "",
+    ]
+    seen: set[str] = set()
+    for t in TOPICS:
+        if t.model is None or t.model.__name__ in seen:
+            continue
+        seen.add(t.model.__name__)
+        used = ", ".join(f"`{x.suffix}`" for x in TOPICS if x.model is t.model)
+        lines += [f"### {t.model.__name__} ({used})", "", "```json",
+                  json.dumps(t.model.model_json_schema(), indent=2), "```", ""]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Write docs/mqtt.md (path from argv, default docs/mqtt.md)."""
+    argv = sys.argv[1:] if argv is None else argv
+    path = argv[0] if argv else "docs/mqtt.md"
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(render_docs())
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
