@@ -168,7 +168,10 @@ class SimGovernor:
 
     # ------------------------------------------------------------------ construction helpers
     def _make_simulator(self, kwargs: dict) -> Any:
-        from fcrlive.sim.realtime import RealtimeSimulator
+        try:
+            from fcrlive.sim.realtime import RealtimeSimulator
+        except ImportError as exc:
+            raise UserError(f"the plant simulator is not available: {exc}") from None
 
         return RealtimeSimulator(self.plant, seed=self.seed, snr_db=self.snr_db, **kwargs)
 

@@ -1,6 +1,6 @@
 """Fault injection for the simulated governor: what a client sees on a real network when a device misbehaves.
 
-Standing faults (``set``/``clear``) stay until cleared; actions (``drop_connections``, ``restart``) happen once.
+Standing faults (``set``/``clear``) stay until cleared; ``drop_connections`` and ``restart`` act once.
 
 | fault            | what the client sees                                                             |
 |------------------|----------------------------------------------------------------------------------|
@@ -87,7 +87,7 @@ class FaultInjector:
         self,
         *,
         hang: bool | None = None,
-        exception: str | int | ExcCodes | None | bool = False,
+        exception: str | int | ExcCodes | bool | None = False,
         delay_ms: float | None = None,
         freeze: bool | None = None,
         nan: bool | None = None,

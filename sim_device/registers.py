@@ -8,6 +8,7 @@ same format. Values are converted with pymodbus's ``convert_to_registers`` / ``c
 
 from __future__ import annotations
 
+import itertools
 import math
 import tomllib
 from dataclasses import dataclass, replace
@@ -120,7 +121,7 @@ class RegisterMap:
             if not math.isfinite(raw):
                 raise ValueError(f"{p.name}: cannot encode {value!r} as {p.type}")
             lo, hi = _INT_RANGES[p.type]
-            raw = int(round(raw))
+            raw = round(raw)
             if not lo <= raw <= hi:
                 raise ValueError(f"{p.name}: {value!r} out of range for {p.type}")
         else:
@@ -257,7 +258,7 @@ def parse_map(data: dict, where: str = "register map") -> RegisterMap:
         raise ConfigError(f"duplicate point name(s) {', '.join(dup)}", where)
     for table in ("input", "holding"):
         pts = sorted((p for p in points if p.table == table), key=lambda p: p.address)
-        for a, b in zip(pts, pts[1:]):
+        for a, b in itertools.pairwise(pts):
             if b.address < a.end:
                 raise ConfigError(f"points {a.name!r} and {b.name!r} overlap in the {table} table", where)
     return RegisterMap(
