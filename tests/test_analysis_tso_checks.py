@@ -164,3 +164,16 @@ def test_points_assessment_matches_model_on_dense_points():
     assert vp.closed_loop_stable is None and vp.stability_margin_wide is None
     assert vp.stability_margin_band == pytest.approx(vm.stability_margin_band, rel=0.05)
     assert vp.passed == vm.passed
+
+
+def test_wide_band_margin_reported_and_selectable():
+    # a 1 s delay: stable, fine in 10-300 s, but close to −1 at T ≈ 4 s (outside the tested band)
+    v = tc.assess_tso(tc.delay(1.0), products=("fcrn",))["fcrn"]
+    assert v.closed_loop_stable is True
+    assert v.stability_margin_band > 1.0
+    assert v.stability_margin_wide < 0.3
+    assert v.period_stability_wide_s < 10.0
+    assert v.passed  # the TR judges the tested band
+    assert any("outside the tested band" in n for n in v.notes)
+    vw = tc.assess_tso(tc.delay(1.0), products=("fcrn",), margin_scope="wide")["fcrn"]
+    assert not vw.passed and any("Req. 8" in r for r in vw.reasons)

@@ -235,6 +235,7 @@ def evaluate_sine_test(
     droop: float | None = None,
     f0_hz: float = F0_HZ,
     t_fme_s: float | None = None,
+    is_control_error: bool = False,
 ) -> SineTestResult:
     """Evaluate one sine test from plain arrays.
 
@@ -249,6 +250,7 @@ def evaluate_sine_test(
     dp_ss_theo_mw, band_hz: normalisation of eq. 7; or ``rated_mw`` and ``droop`` ρ [pu] (then
         ΔP_ss,theo = (Δf_band/f0)·P_rated/ρ). ``rated_mw`` is also needed for G_req.
     t_fme_s: multiply F by 1/(jω T_FME + 1) (test signal generated inside the controller; TR: 1 s).
+    is_control_error: ``freq_hz`` already is the control error e = f_ref − f [Hz] (f_ref then unused).
     """
     t = np.asarray(t, float)
     f = np.asarray(freq_hz, float)
@@ -269,7 +271,7 @@ def evaluate_sine_test(
             f"the data cover {t_end - t[0]:g} s"
         )
     sel = t >= t_start
-    e = f_ref_hz - f
+    e = f if is_control_error else f_ref_hz - f
     fe = fit_sine(t[sel], e[sel], T, t_ref=t_start)
     fp = fit_sine(t[sel], p[sel], T, t_ref=t_start)
     if fe.amplitude <= 0:

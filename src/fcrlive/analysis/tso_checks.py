@@ -654,7 +654,7 @@ def assess_tso(
             )
         if enc is None:
             notes.append("closed-loop stability not established (no wide-band model)")
-        if mw is not None and margin_scope == "band" and mw.margin < thr:
+        if mw is not None and margin_scope == "band" and mw.margin < min(thr, mb.margin - 1e-9):
             notes.append(f"outside the tested band min |1+FG| = {mw.margin:.3f} at T = {mw.period_s:.2f} s")
         if perf.k_red_dyn < k_min:
             reasons.append(
