@@ -97,6 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="virtual",
         help="python-can interface (default virtual; udp_multicast across processes)",
     )
+    p.add_argument("--can-port", type=_port, help="UDP port of the udp_multicast interface (default 43113)")
     p.add_argument(
         "--write-map",
         type=Path,
@@ -181,6 +182,7 @@ async def _run(args) -> int:
         heartbeat_timeout_s=args.heartbeat_timeout,
         can_channel=args.can,
         can_interface=args.can_interface,
+        can_kwargs={"port": args.can_port} if args.can_port else None,
     )
     if args.write_map:
         try:

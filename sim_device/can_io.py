@@ -54,9 +54,11 @@ class CanLink:
         *,
         on_command: Callable[[float, int, int], None],
         dbc_path: str | Path | None = None,
+        bus_kwargs: dict | None = None,
     ):
         self.channel = channel
         self.interface = interface
+        self.bus_kwargs = dict(bus_kwargs or {})
         self.db = load_dbc(dbc_path)
         self._tx = [self.db.get_message_by_name(n) for n in TX_ORDER]
         self._cmd = self.db.get_message_by_name(CMD_MESSAGE)
@@ -68,7 +70,7 @@ class CanLink:
         self.send_errors = 0
 
     def open(self, loop: asyncio.AbstractEventLoop) -> None:
-        self.bus = open_bus(self.channel, self.interface)
+        self.bus = open_bus(self.channel, self.interface, **self.bus_kwargs)
         self._notifier = can.Notifier(self.bus, [self._on_message], timeout=0.1, loop=loop)
 
     def close(self) -> None:

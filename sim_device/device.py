@@ -105,6 +105,7 @@ class SimGovernor:
         heartbeat_timeout_s: float = 2.0,
         can_channel: str | None = None,
         can_interface: str = "virtual",
+        can_kwargs: dict | None = None,
         register_map: RegisterMap | None = None,
         simulator: Any = None,
         min_tick_s: float = 0.01,
@@ -154,6 +155,7 @@ class SimGovernor:
         self.faults = FaultInjector(self)
         self.can_channel = can_channel
         self.can_interface = can_interface
+        self.can_kwargs = dict(can_kwargs or {})
         self.can: CanLink | None = None
 
         self._server: ModbusTcpServer | None = None
@@ -233,7 +235,9 @@ class SimGovernor:
         loop = asyncio.get_running_loop()
         await self._start_server()
         if self.can_channel:
-            self.can = CanLink(self.can_channel, self.can_interface, on_command=self._can_command)
+            self.can = CanLink(
+                self.can_channel, self.can_interface, on_command=self._can_command, bus_kwargs=self.can_kwargs
+            )
             try:
                 self.can.open(loop)
             except BaseException:
