@@ -318,8 +318,8 @@ class FcrliveConfig(BaseSettings):
     @property
     def signals(self) -> tuple[str, ...]:
         """Names of the sampled signals (register points or DBC signals)."""
-        if self.source.kind == "modbus":
-            return self.source.modbus.load_map().names
+        if self.source.kind == "modbus":  # measurements: the input registers (see ModbusParams)
+            return tuple(p.name for p in self.source.modbus.load_map().points if p.table == "input")
         from fcrlive.daemon.can_source import dbc_signal_names
 
         return dbc_signal_names(self.source.can.dbc)
@@ -412,7 +412,7 @@ def explain(exc: ValidationError, model: type[BaseModel]) -> tuple[str, str]:
     if kind == "missing":
         return _loc_str(loc), "required key missing"
     if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
-        msg = _bounds_message(_field_info(model, loc), got_s)
+        msg = _bounds_message(_field_info(model, loc), got)  # env values arrive as strings: no quotes
         if msg:
             return _loc_str(loc), msg
     msg = err["msg"]
@@ -470,11 +470,13 @@ def summary(cfg: FcrliveConfig) -> str:
         rmap = m.load_map()
         from fcrlive.daemon.registers import plan_reads
 
-        blocks = plan_reads(rmap.points)
+        sampled = [p for p in rmap.points if p.table == "input"]
+        blocks = plan_reads(sampled)
         lines.append(
-            f"source modbus {m.host}:{m.port} unit {rmap.unit_id}, {len(rmap.points)} points "
-            f"({', '.join(rmap.names)}), {len(blocks)} read block(s), {m.poll_hz:g} Hz, "
-            f"timeout {m.timeout_s:g} s, words {rmap.word_order}/bytes {rmap.byte_order}"
+            f"source modbus {m.host}:{m.port} unit {rmap.unit_id}, {len(sampled)} input points sampled "
+            f"({', '.join(p.name for p in sampled)}) in {len(blocks)} read block(s) at {m.poll_hz:g} Hz, "
+            f"{len(rmap.points) - len(sampled)} holding points, timeout {m.timeout_s:g} s, "
+            f"words {rmap.word_order}/bytes {rmap.byte_order}"
         )
     else:
         c = cfg.source.can

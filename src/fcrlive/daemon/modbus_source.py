@@ -56,6 +56,9 @@ class ModbusParams:
     watchdog_failures: int = 10
     backoff_min_s: float = 0.1
     backoff_max_s: float = 5.0
+    sample_tables: tuple[str, ...] = ("input",)
+    """Tables sampled at ``poll_hz``: the measurements. Holding registers are settings/commands
+    (excitation offset, limits) read on demand with :meth:`ModbusSource.read_points`."""
 
     @classmethod
     def from_config(cls, cfg) -> ModbusParams:
@@ -103,9 +106,11 @@ class ModbusSource:
         quiet_pymodbus()
         self.p = params
         self.map = params.register_map
-        self.names = self.map.names
-        self.blocks = plan_reads(self.map.points)
-        self.read_blocks = self.blocks  # every point is sampled (holding ones too, e.g. excitation_offset)
+        sampled = [p for p in self.map.points if p.table in params.sample_tables]
+        if not sampled:
+            raise ValueError(f"register map has no points in tables {params.sample_tables}")
+        self.names = tuple(p.name for p in sampled)
+        self.read_blocks = plan_reads(sampled)
         self.stats = SourceStats()
         self._client = None
         self._connected = asyncio.Event()
@@ -175,7 +180,7 @@ class ModbusSource:
 
     # -- polling ----------------------------------------------------------------------------------
 
-    async def _read_once(self) -> tuple[dict[str, float] | None, str]:
+    async def _read_once(self, blocks=None) -> tuple[dict[str, float] | None, str]:
         """Read every block once; ``(values, "")`` or ``(None, reason)`` on a communication error."""
         from pymodbus.exceptions import ModbusException
 
@@ -183,7 +188,7 @@ class ModbusSource:
         if client is None or not client.connected:
             return None, "not connected"
         values: dict[str, float] = {}
-        for b in self.read_blocks:
+        for b in self.read_blocks if blocks is None else blocks:
             fn = client.read_input_registers if b.table == "input" else client.read_holding_registers
             try:
                 rr = await fn(b.address, count=b.count, device_id=self.map.unit_id)
@@ -240,6 +245,13 @@ class ModbusSource:
                                 latency_s=loop.time() - t_req)
             self.stats.samples[q] += 1
             yield sample
+
+    async def read_points(self, table: str = "holding") -> dict[str, float]:
+        """Read every point of ``table`` once (engineering values); ConnectionError on failure."""
+        values, reason = await self._read_once(plan_reads([p for p in self.map.points if p.table == table]))
+        if values is None:
+            raise ConnectionError(reason)
+        return values
 
     # -- writing ----------------------------------------------------------------------------------
 
