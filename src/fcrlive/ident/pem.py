@@ -339,6 +339,8 @@ def _sm(segs_target, nb: int, nf: int, nk: int, iters: int = 12) -> tuple[np.nda
             rows.append(X)
         X = np.vstack(rows)
         sol = _ls(X[:, :p], X[:, p])
+        if not np.all(np.isfinite(sol)):
+            break
         Fn = _reflect(np.concatenate(([1.0], sol[:nf])))
         Bn = np.concatenate((np.zeros(nk), sol[nf:]))
         done = Fn.size == F.size and np.max(np.abs(Fn - F)) < 1e-9
@@ -405,8 +407,16 @@ def _add_noise_model(st: _Struct, segs, Bs, Fs, n_ar: int) -> np.ndarray:
 def _start_simulated(st: _Struct, segs, ha: PolyModel, n_ar: int) -> np.ndarray:
     """Start 1: Steiglitz-McBride of each B_i/F_i on the high-order ARX's noise-free output of u_i."""
     Bs, Fs = [], []
+    # a high-order ARX fitted in closed loop can have an unstable A: simulate with A's roots reflected
+    # inside (|A| scaled by 1/Π|r|, compensated on B) so the noise-free output stays bounded
+    A = ha.a
+    gain = 1.0
+    if _max_root(A) >= _ROOT_MAX:
+        r = np.roots(A)
+        gain = float(np.prod(np.maximum(np.abs(r), 1.0)))
+        A = _reflect(A)
     for i in range(st.nu):
-        tgt = [(u[:, i], sps.lfilter(ha.b[i], ha.a, u[:, i])) for _, u in segs]
+        tgt = [(u[:, i], sps.lfilter(ha.b[i] / gain, A, u[:, i])) for _, u in segs]
         B, F = _sm(tgt, st.nb[i], st.nf[i], st.nk[i])
         Bs.append(B)
         Fs.append(F)

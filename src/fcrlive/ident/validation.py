@@ -1,0 +1,241 @@
+"""Model validation like the toolbox: ``resid``, ``compare``, AIC/BIC/FPE and order search.
+
+Correlations are computed per experiment and summed (no products across a gap), then normalised:
+
+    r_ε(k)    = R_ε(k)/R_ε(0),                       R_ε(k) = (1/N) Σ ε(t) ε(t−k)
+    r_εu(τ)   = R_εu(τ)/sqrt(R_ε(0) R_u(0)),         R_εu(τ) = (1/N) Σ ε(t) u(t−τ)
+
+τ > 0 means ε now vs u in the past: a significant r_εu(τ ≥ 0) says the dynamics from u are not fully
+modelled. τ < 0 (u now vs ε in the past) is correlation through feedback and is expected in closed
+loop; it is reported but not part of the pass/fail decision.
+
+Pass/fail uses portmanteau statistics rather than "every lag inside its band" (with 25 lags at 99 %
+that rule alone rejects a correct model ~22 % of the time):
+  whiteness:      Q = N Σ_{k=1..M} r_ε(k)²  ~ χ²(M − nc − nd)
+  independence:   S = N r̂ᵀ R̄_u⁻¹ r̂ over τ = 0..M ~ χ²(M + 1)   (R̄_u the normalised input Toeplitz matrix)
+The per-lag bands (±z/√N, z for the chosen confidence) are returned for plots as in ``resid``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.stats as stats
+
+from fcrlive.ident.data import IdData
+from fcrlive.ident.poly import PolyModel
+
+
+def _xcorr_sum(a_segs, b_segs, lags: np.ndarray) -> np.ndarray:
+    """Σ over experiments of Σ_t a(t) b(t−τ) for each τ in lags (zero outside each experiment)."""
+    out = np.zeros(lags.size)
+    for a, b in zip(a_segs, b_segs):
+        L = a.shape[0]
+        for j, tau in enumerate(lags):
+            if tau >= 0 and tau < L:
+                out[j] += a[tau:] @ b[:L - tau]
+            elif tau < 0 and -tau < L:
+                out[j] += a[:L + tau] @ b[-tau:]
+    return out
+
+
+@dataclass(frozen=True)
+class ResidResult:
+    """Residual analysis.
+
+    Attributes:
+        lags: 0..M for the autocorrelation.
+        autocorr: r_ε(k), k = 0..M (r_ε(0) = 1).
+        xlags: −M..M for the cross-correlations.
+        xcorr: r_εu_i(τ), shape (nu, 2M+1).
+        band99, band95: per-lag ± bands of the normalised correlations (1/√N scale).
+        whiteness_p: p-value of the whiteness portmanteau test.
+        independence_p: p-value of the independence test (τ = 0..M) per input.
+        confidence: level of the pass/fail decisions.
+        white, independent: test results; ``passed`` = both.
+        n_outside: lags outside the band at ``confidence`` (autocorr k ≥ 1; xcorr τ ≥ 0 per input).
+    """
+
+    lags: np.ndarray
+    autocorr: np.ndarray
+    xlags: np.ndarray
+    xcorr: np.ndarray
+    band99: float
+    band95: float
+    whiteness_p: float
+    independence_p: tuple[float, ...]
+    confidence: float
+    white: bool
+    independent: tuple[bool, ...]
+    n_outside: tuple[int, ...]
+
+    @property
+    def passed(self) -> bool:
+        return self.white and all(self.independent)
+
+
+def resid(model: PolyModel, data: IdData, max_lag: int = 25, confidence: float = 0.99) -> ResidResult:
+    """Residual whiteness and residual/input independence tests (the toolbox's ``resid``)."""
+    data.require_finite()
+    eps = model.residuals(data)
+    e_segs = data.split_signal(eps)
+    n = eps.size
+    M = int(max_lag)
+    lags = np.arange(M + 1)
+    re = _xcorr_sum(e_segs, e_segs, lags) / n
+    r_e = re / re[0]
+    xl = np.arange(-M, M + 1)
+    xc = np.zeros((data.nu, xl.size))
+    ind_p, ind_ok, outside = [], [], []
+    z = stats.norm.ppf(0.5 + confidence / 2)
+    band = z / np.sqrt(n)
+    dof_w = max(M - model.nc - model.nd, 1)
+    q = n * float(np.sum(r_e[1:] ** 2))
+    white_p = float(stats.chi2.sf(q, dof_w))
+    outside.append(int(np.sum(np.abs(r_e[1:]) > band)))
+    for i in range(data.nu):
+        u_segs = [u[:, i] - 0.0 for _, u in data.segments()]
+        ru = _xcorr_sum(u_segs, u_segs, lags) / n
+        reu = _xcorr_sum(e_segs, u_segs, xl) / n
+        xc[i] = reu / np.sqrt(re[0] * ru[0])
+        pos = xc[i, M:]
+        T = sla.toeplitz(ru / ru[0])
+        try:
+            s = n * float(pos @ np.linalg.solve(T, pos))
+        except np.linalg.LinAlgError:
+            s = n * float(pos @ np.linalg.lstsq(T, pos, rcond=None)[0])
+        p = float(stats.chi2.sf(s, M + 1))
+        ind_p.append(p)
+        ind_ok.append(p > 1 - confidence)
+        outside.append(int(np.sum(np.abs(pos) > band)))
+    return ResidResult(
+        lags=lags, autocorr=r_e, xlags=xl, xcorr=xc,
+        band99=float(stats.norm.ppf(0.995) / np.sqrt(n)), band95=float(stats.norm.ppf(0.975) / np.sqrt(n)),
+        whiteness_p=white_p, independence_p=tuple(ind_p), confidence=confidence,
+        white=white_p > 1 - confidence, independent=tuple(ind_ok), n_outside=tuple(outside),
+    )
+
+
+@dataclass(frozen=True)
+class CompareResult:
+    """``compare``: NRMSE fit [%] = 100 (1 − ‖y − ŷ‖/‖y − ȳ‖) and the model output ŷ."""
+
+    fit_percent: float
+    y_model: np.ndarray
+    horizon: str
+
+
+def compare(model: PolyModel, data: IdData, horizon: str | int = "sim") -> CompareResult:
+    """Fit of the simulated (``horizon="sim"``) or one-step predicted (``horizon=1``) output.
+
+    Zero initial conditions per experiment; ȳ is the mean of each experiment.
+    """
+    if horizon == "sim":
+        yh = model.simulate(data)
+    elif horizon == 1:
+        yh = model.predict(data)
+    else:
+        raise ValueError(f"horizon must be 'sim' or 1, got {horizon!r}")
+    num = float(np.sum((data.y - yh) ** 2))
+    den = sum(float(np.sum((y - y.mean()) ** 2)) for y, _ in data.segments())
+    fit = 100.0 * (1.0 - np.sqrt(num / den)) if den > 0 else -np.inf
+    return CompareResult(fit, yh, str(horizon))
+
+
+def _loss_n_p(model: PolyModel) -> tuple[float, int, int]:
+    if model.report is None:
+        raise ValueError("model has no estimation report (loss and N unknown)")
+    return model.report.loss, model.report.n_samples, model.n_params
+
+
+def aic(model: PolyModel) -> float:
+    """Akaike's criterion N·log V + 2p (V = mean squared prediction error on the estimation data)."""
+    v, n, p = _loss_n_p(model)
+    return float(n * np.log(v) + 2 * p)
+
+
+def bic(model: PolyModel) -> float:
+    """Bayesian (Rissanen MDL) criterion N·log V + p·log N."""
+    v, n, p = _loss_n_p(model)
+    return float(n * np.log(v) + p * np.log(n))
+
+
+def fpe(model: PolyModel) -> float:
+    """Akaike's final prediction error V (1 + p/N)/(1 − p/N)."""
+    v, n, p = _loss_n_p(model)
+    return float(v * (1 + p / n) / (1 - p / n))
+
+
+_CRITERIA = {"aic": aic, "bic": bic, "fpe": fpe}
+
+
+@dataclass(frozen=True)
+class OrderSearchResult:
+    """Order search: every structure tried with its score; ``best`` has the lowest score."""
+
+    orders: tuple[tuple, ...]
+    scores: np.ndarray
+    models: tuple[PolyModel, ...]
+    criterion: str
+
+    @property
+    def best_index(self) -> int:
+        return int(np.argmin(self.scores))
+
+    @property
+    def best(self) -> PolyModel:
+        return self.models[self.best_index]
+
+    @property
+    def best_orders(self) -> tuple:
+        return self.orders[self.best_index]
+
+
+def bj_order_search(data: IdData, grid: Iterable[Sequence[int]], nk: int | Sequence[int] = 1,
+                    criterion: str = "aic", val: IdData | None = None) -> OrderSearchResult:
+    """Fit BJ(nb, nc, nd, nf) for each (nb, nc, nd, nf) in ``grid`` and score it.
+
+    ``criterion``: "aic", "bic", "fpe" on the estimation data, or "val" for the mean squared one-step
+    prediction error on ``val``. A small grid is meant (each fit is a nonlinear search).
+    """
+    from fcrlive.ident.pem import bj  # avoid an import cycle at module load
+
+    orders, scores, models = [], [], []
+    for o in grid:
+        nb, nc, nd, nf = (int(x) for x in o)
+        m = bj(data, nb, nc, nd, nf, nk)
+        if criterion == "val":
+            if val is None:
+                raise ValueError("criterion 'val' needs validation data")
+            s = float(np.mean(m.residuals(val) ** 2))
+        else:
+            s = _CRITERIA[criterion](m)
+        orders.append((nb, nc, nd, nf))
+        scores.append(s)
+        models.append(m)
+    return OrderSearchResult(tuple(orders), np.array(scores), tuple(models), criterion)
+
+
+def arx_order_search(data: IdData, na_range: Iterable[int], nb_range: Iterable[int],
+                     nk: int | Sequence[int] = 1, criterion: str = "aic",
+                     val: IdData | None = None) -> OrderSearchResult:
+    """Fit ARX(na, nb, nk) (same nb for every input) over the ranges and score it like bj_order_search."""
+    from fcrlive.ident.arx import arx
+
+    orders, scores, models = [], [], []
+    for na in na_range:
+        for nb in nb_range:
+            m = arx(data, na, nb, nk)
+            if criterion == "val":
+                if val is None:
+                    raise ValueError("criterion 'val' needs validation data")
+                s = float(np.mean(m.residuals(val) ** 2))
+            else:
+                s = _CRITERIA[criterion](m)
+            orders.append((int(na), int(nb)))
+            scores.append(s)
+            models.append(m)
+    return OrderSearchResult(tuple(orders), np.array(scores), tuple(models), criterion)
