@@ -1,0 +1,141 @@
+"""OE and Box-Jenkins by prediction error: known systems, Jacobian, multi-experiment, search, errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.signal as sps
+
+from fcrlive.ident import (
+    IdData,
+    NonFiniteDataError,
+    NotExcitingError,
+    OrderError,
+    PolyModel,
+    TooFewSamplesError,
+    UnstableModelError,
+    bj,
+    oe,
+)
+from fcrlive.ident.pem import _eval, _Struct
+from fcrlive.ident.testsystems import bj_model, simulate_closed_loop, simulate_open_loop
+
+TRUE = bj_model([0.5, 0.3], [1, 0.6], [1, -0.9], [1, -1.5, 0.7], nk=1)
+
+
+def _open(n, seed, sigma=0.3, model=TRUE):
+    rng = np.random.default_rng(seed)
+    return simulate_open_loop(model, rng.standard_normal((n, model.nu)), rng, sigma)
+
+
+def test_bj_siso_within_three_sd_and_report():
+    d = _open(6000, 1)
+    m = bj(d, 2, 1, 1, 2, 1)
+    z = (m.theta - TRUE.theta) / m.sd
+    assert np.all(np.abs(z) < 3), z
+    r = m.report
+    assert r.method == "bj" and r.converged and r.iterations >= 1 and r.stop_reason
+    np.testing.assert_allclose(r.loss, np.mean(m.residuals(d) ** 2))
+    assert m.noise_variance == pytest.approx(0.09, rel=0.05)
+    assert m.is_stable()
+
+
+def test_oe_within_three_sd():
+    model = bj_model([0.5, 0.3], [1.0], [1.0], [1, -1.5, 0.7], nk=2)
+    d = _open(3000, 2, sigma=0.5, model=model)
+    m = oe(d, 2, 2, 2)
+    z = (m.theta - model.theta) / m.sd
+    assert np.all(np.abs(z) < 3), z
+    assert m.b[0][:2].tolist() == [0.0, 0.0]
+
+
+def test_bj_miso_shared_noise_model():
+    model = PolyModel(a=[1.0], b=([0, 1.0, 0.5], [0, 0, -0.8]), c=[1, 0.5], d=[1, -0.8],
+                      f=([1, -0.7], [1, -1.2, 0.5]), nk=(1, 2), Ts=1.0)
+    d = _open(5000, 3, sigma=0.5, model=model)
+    m = bj(d, [2, 1], 1, 1, [1, 2], [1, 2])
+    z = (m.theta - model.theta) / m.sd
+    assert np.all(np.abs(z) < 3), z
+    assert m.param_names() == ["b1_1", "b1_2", "b2_2", "c1", "d1", "f1_1", "f2_1", "f2_2"]
+
+
+def test_analytic_jacobian_matches_finite_differences():
+    model = PolyModel(a=[1.0], b=([0, 1.0, 0.5], [-0.8]), c=[1, 0.5], d=[1, -0.8, 0.1],
+                      f=([1, -0.7], [1, -1.2, 0.5]), nk=(1, 0), Ts=1.0)
+    d = IdData.merge(_open(300, 4, model=model), _open(200, 5, model=model))
+    st = _Struct((2, 1), 1, 2, (1, 2), (1, 0))
+    th = model.theta + 0.05
+    segs = list(d.segments())
+    _, J = _eval(st, th, segs, True)
+    h = 1e-6
+    Jn = np.column_stack([(_eval(st, th + h * np.eye(th.size)[k], segs, False)[0]
+                           - _eval(st, th - h * np.eye(th.size)[k], segs, False)[0]) / (2 * h)
+                          for k in range(th.size)])
+    np.testing.assert_allclose(J, Jn, atol=1e-6 * np.abs(Jn).max())
+
+
+def test_multi_experiment_restarts_filters_and_sums_losses():
+    a, b = _open(2000, 6), _open(1500, 7)
+    m = bj(IdData.merge(a, b), 2, 1, 1, 2, 1)
+    e = m.residuals(IdData.merge(a, b))
+    np.testing.assert_allclose(e[2000:], m.residuals(b))  # the second experiment starts from rest
+    ssr = np.sum(m.residuals(a) ** 2) + np.sum(m.residuals(b) ** 2)
+    np.testing.assert_allclose(m.report.loss * 3500, ssr)
+    z = (m.theta - TRUE.theta) / m.sd
+    assert np.all(np.abs(z) < 3), z
+
+
+def test_closed_loop_direct_bj_with_loop_delay_is_consistent():
+    rng = np.random.default_rng(8)
+    r = rng.standard_normal(6000)
+    cl = simulate_closed_loop(TRUE, r, [0.3], [1.0], rng, 0.3)
+    m = bj(cl.data, 2, 1, 1, 2, 1)
+    z = (m.theta - TRUE.theta) / m.sd
+    assert np.all(np.abs(z) < 3), z
+
+
+def test_search_from_poor_start_and_multistart_keep_best():
+    d = _open(3000, 9)
+    good = bj(d, 2, 1, 1, 2, 1)
+    poor = bj_model([0.01, 0.01], [1, -0.5], [1, 0.5], [1, 0.2, 0.1], nk=1)
+    m = bj(d, 2, 1, 1, 2, 1, init=poor, multistart=True)
+    assert len(m.report.start_losses) >= 2
+    assert m.report.loss == pytest.approx(min(m.report.start_losses))
+    assert m.report.loss <= good.report.loss * (1 + 1e-8)
+
+
+def test_unstable_initial_models():
+    d = _open(1000, 10)
+    # roots outside the unit circle are reflected: the search still works
+    outside = bj_model([0.5, 0.3], [1, 2.0], [1, -0.9], [1, -2.5, 1.0], nk=1)  # F roots 2 and 0.5
+    m = bj(d, 2, 1, 1, 2, 1, init=outside)
+    assert m.is_stable() and m.report.converged
+    # a root on the unit circle cannot be reflected
+    integrator = bj_model([0.5, 0.3], [1, 0.6], [1, -1.0], [1, -1.5, 0.7], nk=1)
+    with pytest.raises(UnstableModelError, match="initial D has a root on the unit circle"):
+        bj(d, 2, 1, 1, 2, 1, init=integrator)
+    with pytest.raises(OrderError, match="differ"):
+        bj(d, 2, 1, 1, 1, 1, init=TRUE)
+
+
+def test_pem_errors_name_signal_and_orders():
+    d = _open(500, 11)
+    y = d.y.copy()
+    y[3] = np.nan
+    with pytest.raises(NonFiniteDataError, match="'y'"):
+        bj(IdData(y, d.u, 1.0), 2, 1, 1, 2, 1)
+    with pytest.raises(NotExcitingError, match="'u1'"):
+        oe(IdData(d.y, np.ones(500), 1.0), 2, 2, 1)
+    with pytest.raises(TooFewSamplesError, match=r"BJ\(nb=\[2\]"):
+        bj(IdData(d.y[:6], d.u[:6], 1.0), 2, 1, 1, 2, 1)
+    with pytest.raises(OrderError, match="nb = 0"):
+        oe(d, 0, 2, 1)
+
+
+def test_zero_delay_and_fir_part():
+    model = bj_model([0.8, -0.3], [1.0], [1.0], [1.0], nk=0)
+    d = _open(2000, 12, sigma=0.1, model=model)
+    m = oe(d, 2, 0, 0)
+    np.testing.assert_allclose(m.theta, [0.8, -0.3], atol=5 * m.sd.max())
+    y0 = sps.lfilter(m.b[0], m.f[0], d.u[:, 0])
+    np.testing.assert_allclose(m.simulate(d), y0)
