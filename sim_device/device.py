@@ -61,6 +61,10 @@ REQUIRED_POINTS = (
 _BIT_FUNCTIONS = {1, 2, 5, 15}
 
 
+async def _no_such_unit(*_args) -> ExcCodes:
+    return ExcCodes.GATEWAY_NO_RESPONSE
+
+
 class PortInUseError(UserError):
     """The TCP port cannot be bound."""
 
@@ -190,7 +194,7 @@ class SimGovernor:
         self._applied_hz = 0.0
         self._published: dict[str, float] | None = None
 
-    def _build_simdevice(self) -> SimDevice:
+    def _build_simdevice(self) -> list[SimDevice]:
         m = self.register_map
         nameplate = {
             "excitation_limit": self.excitation_limit_hz,
@@ -214,11 +218,14 @@ class SimGovernor:
         # pymodbus needs a non-empty coil and discrete-input block in non-shared mode; the action
         # hook refuses every bit function (ILLEGAL_FUNCTION): this device has no coils.
         bits = [SimData(address=0, values=[False] * 16, datatype=DataType.BITS)]
-        return SimDevice(
-            id=m.unit_id,
-            simdata=(bits, list(bits), holding, inputs),
-            action=self._action,
-        )
+        devices = [SimDevice(id=m.unit_id, simdata=(bits, list(bits), holding, inputs), action=self._action)]
+        if m.unit_id != 0:
+            # Any other unit id: answered with exception 11 (gateway target failed to respond), as a
+            # Modbus TCP gateway with nothing behind that id would (pymodbus: id 0 = "all other ids").
+            whole = [SimData(address=0, count=65536, values=0, datatype=DataType.REGISTERS)]
+            other = SimDevice(id=0, simdata=(bits, list(bits), whole, list(whole)), action=_no_such_unit)
+            devices.append(other)
+        return devices
 
     # ------------------------------------------------------------------ lifecycle
     async def __aenter__(self) -> SimGovernor:

@@ -298,6 +298,8 @@ async def test_refused_writes_and_functions():
         assert rr.isError() and rr.exception_code == 1
         rr = await client.write_coil(0, True, device_id=UNIT)
         assert rr.isError() and rr.exception_code == 1
+        rr = await client.read_input_registers(IN_START, count=2, device_id=UNIT + 1)
+        assert rr.isError() and rr.exception_code == 11  # no such unit behind this "gateway"
         # nothing changed on the device
         h = await read_holding(client)
         assert (
