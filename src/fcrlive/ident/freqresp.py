@@ -69,6 +69,9 @@ class FreqResp:
     jacobian: np.ndarray
     sources: tuple[tuple[str, np.ndarray], ...] = ()
 
+    # numpy arrays on the left of +, −, ·, / defer to FreqResp's reflected operators
+    __array_ufunc__ = None
+
     def __post_init__(self) -> None:
         omega = np.atleast_1d(np.asarray(self.omega, dtype=float))
         value = np.atleast_1d(np.asarray(self.value, dtype=complex))
