@@ -547,8 +547,12 @@ class SimGovernor:
         return 0 if self._server is None else len(self._server.active_connections)
 
     # ------------------------------------------------------------------ truth
-    def truth(self) -> dict[str, Any]:
-        """What the identification should find, from the plant parameters (for tests and the demo)."""
+    def truth(self, analytic: bool = False) -> dict[str, Any]:
+        """What the identification should find, from the plant parameters (for tests and the demo).
+
+        ``analytic=True`` adds the peaks of the analytic S and G_1 (continuous time, from
+        :func:`fcrlive.plant.transfer.analytic`; imports python-control, about a second the first time).
+        """
         t: dict[str, Any] = {
             "dt": self.dt,
             "speed": self.speed,
@@ -575,4 +579,18 @@ class SimGovernor:
             # steady state: ΔPm = At·(Δr − Δy)/ρ·rated, i.e. MW per Hz of (offset − Δf)
             static_mw_per_hz=u.turbine.At * self.rated_mw / (self.f0 * rho),
         )
+        if analytic:
+            try:
+                from fcrlive.plant import transfer
+            except ImportError:  # pragma: no cover - only if the analytic module is missing
+                return t
+            tfs = transfer.analytic(p)
+            s_pk, g1_pk = transfer.peak(tfs.S), transfer.peak(tfs.G_1)
+            t.update(
+                g1_static=transfer.static_gain(tfs.G_1),
+                max_S=s_pk.value,
+                max_S_omega_rad_s=s_pk.omega_rad_s,
+                max_G1=g1_pk.value,
+                max_G1_omega_rad_s=g1_pk.omega_rad_s,
+            )
         return t
