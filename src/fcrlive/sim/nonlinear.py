@@ -1,0 +1,430 @@
+"""The nonlinear two-machine simulator: one controller sample as a step map, run three ways.
+
+The step map (:class:`Stepper`) takes the state at t_n = n Tc to t_{n+1}:
+
+1. unit 1's digital governor samples y[n] = f1(t_n) + v[n] (filtered speed plus process noise; in the
+   open-loop industry test the applied frequency replaces f1), forms ε[n] = r[n] − y[n], computes the
+   demand c[n] (clipped to the gate limits, with conditional-integration anti-windup) and updates its
+   forward-Euler integral;
+2. the continuous plant (both units, network, filters, unit 2's analogue governor) is integrated over
+   [t_n, t_n + Tc] with c[n] held (ZOH) and the load moving linearly from ΔP_L[n] to ΔP_L[n+1]
+   (plant-model.md: holding it constant across stages gave −23 % in |G_1| at T = 10 s).
+
+Integrators for step 2 (``integrator``):
+
+- ``"exp"`` (default): exponential (ETD-RK2, "exponential Heun") integrator. The linear part
+  ``A x + B_c Δc + B_L ΔP_L``, which carries all the dynamics that matter at the 0.01-1 Hz of interest,
+  is integrated EXACTLY (matrix exponential, the same discretisation as the linear model); only the
+  small nonlinear residual N(x) (turbine head curvature, limiters) is integrated to second order. One
+  matrix product and two residual evaluations per step.
+- ``"rk4"``: classic RK4 on the full right-hand side with ``substeps`` per controller sample
+  (default: enough for h ≤ 0.02 s; the fastest eigenvalues are about −25 1/s). A cross-check.
+
+Three ways to run the same step map:
+
+- :func:`run_batch`: many realisations stepped together in numpy (runs on the trailing axis);
+- :func:`run_single`: one realisation as a waveform fixed point: guess the trajectory (the linear
+  model), evaluate the step map for ALL samples at once (time on the trailing axis), and solve the
+  linear recursion ``z[n+1] = Phi_cl z[n] + (S(z[n]) − Phi_cl z[n])`` with per-mode IIR filters
+  (scipy.signal.lfilter). The fixed point is exactly the stepped trajectory; a few iterations bring the
+  difference to round-off. If it does not converge (limiters active for long) it falls back to
+  stepping.
+- :class:`fcrlive.sim.realtime.RealtimeSimulator`: one step at a time.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from fcrlive.sim import linear as lin
+from fcrlive.sim import model as mdl
+
+Integrator = Literal["exp", "rk4"]
+
+
+class Stepper:
+    """The step map of one controller sample, vectorised over a trailing axis of length R."""
+
+    def __init__(self, plant, *, open_loop: bool = False, integrator: Integrator = "exp",
+                 substeps: int | None = None, nonlinear: bool = True):
+        self.m = m = mdl.build(plant)
+        self.open_loop = open_loop
+        self.integrator = integrator
+        self.nonlinear = nonlinear
+        u1 = plant.unit
+        self.g0 = m.tp1.g0
+        self.g_min, self.g_max = u1.servo.g_min, u1.servo.g_max
+        self.k = m.ctl1
+        self.kt = m.Tc * m.ctl1.Ki
+        nx = m.nx
+        # x* = P @ [x; Δc; ΔP_L[n]; ΔP_L[n+1] − ΔP_L[n]; N(x)]
+        self.P = np.hstack([m.Phi, m.Gc[:, None], m.GL0[:, None], m.GL1[:, None], m.GN0])
+        self.GN1 = m.GN1
+        self.nx = nx
+        if integrator == "rk4":
+            if substeps is None:
+                substeps = max(1, math.ceil(m.Tc / 0.02 - 1e-9))
+            self.substeps = int(substeps)
+            self.EN = np.zeros((nx, len(mdl.RESIDUAL_ROWS)))
+            for j, row in enumerate(mdl.RESIDUAL_ROWS):
+                self.EN[row, j] = 1.0
+        elif integrator != "exp":
+            raise ValueError(f"unknown integrator {integrator!r}")
+
+    # -- unit 1's digital governor ------------------------------------------------------------------
+    def control(self, x: np.ndarray, i1: np.ndarray, r, v, app):
+        """(y, ε, c, Δc, i1_next) at one sample; ``app`` the applied frequency deviation (open loop)."""
+        return self.control_full(x, i1, r, v, app)[:5]
+
+    def control_full(self, x: np.ndarray, i1: np.ndarray, r, v, app):
+        """:meth:`control` plus the unlimited Δc and integrator update of the linear governor."""
+        k = self.k
+        y = (app if self.open_loop else x[mdl.F1]) + v
+        eps = r - y
+        dcr = k.ce * eps + k.ci * i1
+        if k.cg != 0.0:
+            dcr = dcr + k.cg * x[mdl.G1]
+        inc = k.ie * eps + k.ii * i1
+        if k.ig != 0.0:
+            inc = inc + k.ig * x[mdl.G1]
+        if self.nonlinear:
+            c = np.clip(dcr + self.g0, self.g_min, self.g_max)
+            dc = c - self.g0
+            # Conditional integration: no integrating further into a limit (anti-windup).
+            sat = c != dcr + self.g0
+            inc_lin = inc
+            if np.any(sat):
+                inc = np.where(sat & ((dc - dcr) * inc < 0.0), 0.0, inc)
+            i1n = i1 + self.kt * inc
+            i1n_lin = i1n if not np.any(sat) else i1 + self.kt * inc_lin
+        else:
+            dc = dcr
+            c = dcr + self.g0
+            i1n = i1n_lin = i1 + self.kt * inc
+        return y, eps, c, dc, i1n, dcr, i1n_lin
+
+    # -- the continuous plant over one sample -------------------------------------------------------
+    def advance(self, x: np.ndarray, dc, pl0, pl1) -> np.ndarray:
+        m = self.m
+        if self.integrator == "rk4":
+            return self._rk4(x, dc, pl0, pl1)
+        R = x.shape[1]
+        nx = self.nx
+        U = np.empty((nx + 8, R))
+        U[:nx] = x
+        U[nx] = dc
+        U[nx + 1] = pl0
+        np.subtract(pl1, pl0, out=U[nx + 2])
+        if not self.nonlinear:
+            U[nx + 3:] = 0.0
+            return self.P @ U
+        mdl.residual(m, x, out=U[nx + 3:])
+        xs = self.P @ U
+        N1 = mdl.residual(m, xs)
+        N1 -= U[nx + 3:]
+        xs += self.GN1 @ N1
+        return xs
+
+    def _f(self, x, dc, pl):
+        m = self.m
+        f = m.A @ x
+        f += np.outer(m.B[:, 0], dc) if np.ndim(dc) else m.B[:, [0]] * dc
+        f += m.B[:, [1]] * pl
+        if self.nonlinear:
+            f += self.EN @ mdl.residual(m, x)
+        return f
+
+    def _rk4(self, x, dc, pl0, pl1):
+        K = self.substeps
+        h = self.m.Tc / K
+        dc = np.asarray(dc, float)
+        pl0 = np.asarray(pl0, float)
+        dpl = (np.asarray(pl1, float) - pl0) / K
+        for j in range(K):
+            a = pl0 + j * dpl
+            b = a + 0.5 * dpl
+            c = a + dpl
+            k1 = self._f(x, dc, a)
+            k2 = self._f(x + 0.5 * h * k1, dc, b)
+            k3 = self._f(x + 0.5 * h * k2, dc, b)
+            k4 = self._f(x + h * k3, dc, c)
+            x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        return x
+
+
+@dataclass(frozen=True)
+class Inputs:
+    """Per-sample inputs of one run (length N; ``pl`` has N + 1 knots)."""
+
+    r: np.ndarray
+    v: np.ndarray
+    pl: np.ndarray
+    app: np.ndarray | None
+
+
+RAW = ("y", "epsilon", "c", "a", "u", "w_coi", "pm", "omega")
+"""Signals a run returns: y, ε, c (absolute), a (absolute), u (filtered ΔPe1), ω_coi, Pm1 (absolute),
+Δω1."""
+
+
+def _outputs_from_states(st: Stepper, x: np.ndarray, i1: np.ndarray, inp: Inputs) -> dict[str, np.ndarray]:
+    y, eps, c, _dc, _ = st.control(x, i1, inp.r, inp.v, inp.app)
+    m = st.m
+    if st.nonlinear:
+        pm = mdl.pm1_absolute(m, x)
+    else:
+        pm = m.tp1.Pm0 + m.C_pm1 @ x
+    return {
+        "y": y,
+        "epsilon": eps,
+        "c": c,
+        "a": x[mdl.G1] + m.tp1.g0,
+        "u": x[mdl.PF1].copy(),
+        "w_coi": m.C_coi @ x,
+        "pm": pm,
+        "omega": x[mdl.W1].copy(),
+    }
+
+
+def _w_matrix(inp: Inputs) -> np.ndarray:
+    N = len(inp.r)
+    w = np.zeros((len(lin.INPUTS), N))
+    w[0], w[1] = inp.r, inp.v
+    w[2], w[3] = inp.pl[:N], inp.pl[1:N + 1]
+    if inp.app is not None:
+        w[4] = inp.app
+    return w
+
+
+def run_single(plant, inp: Inputs, *, open_loop: bool = False, nonlinear: bool = True,
+               integrator: Integrator = "exp", substeps: int | None = None, tol: float = 1e-10,
+               max_iter: int = 40) -> dict[str, np.ndarray]:
+    """One run from the steady state (module docstring); returns the :data:`RAW` signals, length N."""
+    st = Stepper(plant, open_loop=open_loop, integrator=integrator, substeps=substeps, nonlinear=nonlinear)
+    cl = lin.closed_loop(plant, open_loop)
+    w = _w_matrix(inp)
+    z = lin.recursion(cl.Phi, cl.Gam @ w)  # the linear model: exact when nonlinear=False and "exp"
+    if nonlinear and integrator == "exp":
+        z = _fixed_point_exp(st, cl, inp, z, tol, max_iter)
+    elif integrator != "exp":
+        nx = st.nx
+        for _ in range(max_iter):
+            x, i1 = z[:nx], z[nx]
+            _, _, _, dc, i1n = st.control(x, i1, inp.r, inp.v, inp.app)
+            xn = st.advance(x, dc, inp.pl[:-1], inp.pl[1:])
+            S = np.vstack([xn, i1n[None]])
+            d = S - cl.Phi @ z
+            z_new = lin.recursion(cl.Phi, d)
+            scale = np.max(np.abs(z_new), axis=1) + 1e-300
+            delta = float(np.max(np.max(np.abs(z_new - z), axis=1) / scale))
+            z = z_new
+            if delta < tol:
+                break
+        else:
+            z = _step_all(st, inp)
+    return _outputs_from_states(st, z[:st.nx], z[st.nx], inp)
+
+
+def _fixed_point_exp(st: Stepper, cl, inp: Inputs, z_lin: np.ndarray, tol: float,
+                     max_iter: int) -> np.ndarray:
+    """The waveform fixed point for the exponential integrator, iterating on the nonlinear correction.
+
+    Each step is the linear closed-loop step plus δ[n] = GN0 N0 + GN1 (N1 − N0) + Gc Δc_lim + e_i Δi_lim
+    (residuals at x[n] and at the predictor x*[n], limiter corrections). With the current iterate
+    z[n+1] = (linear step) + δ_prev[n], the predictor is z[n+1] − δ_prev[n] + GN0 N0 + Gc Δc_lim on x's
+    rows, so no full step map is evaluated; z = z_lin + recursion(δ).
+    """
+    m, nx = st.m, st.nx
+    nz, N = z_lin.shape
+    md = lin.modal(cl.Phi)
+    if md is None:
+        return _step_all(st, inp)
+    nN = len(mdl.RESIDUAL_ROWS)
+    Gch = np.zeros((nz, 2 * nN + 2))  # channels: N0, N1 − N0, Δc_lim, Δi_lim
+    Gch[:nx, :nN] = m.GN0
+    Gch[:nx, nN:2 * nN] = m.GN1
+    Gch[:nx, 2 * nN] = m.Gc
+    Gch[nx, 2 * nN + 1] = 1.0
+    proj = md.proj @ Gch
+    Gx = Gch[:nx]
+    ch = np.zeros((2 * nN + 2, N))
+    z = z_lin
+    for _ in range(max_iter):
+        x, i1 = z[:nx], z[nx]
+        _, _, _, dc, i1n, dcr, i1n_lin = st.control_full(x, i1, inp.r, inp.v, inp.app)
+        new = np.empty_like(ch)
+        mdl.residual(m, x, out=new[:nN])
+        new[nN:2 * nN] = 0.0
+        np.subtract(dc, dcr, out=new[2 * nN])
+        np.subtract(i1n, i1n_lin, out=new[2 * nN + 1])
+        xs = z[:nx, 1:] + Gx @ (new - ch)[:, :-1]
+        N1 = mdl.residual(m, xs)
+        np.subtract(N1, new[:nN, :-1], out=new[nN:2 * nN, :-1])
+        z_new = z_lin + lin.filter_projected(md, proj @ new)
+        scale = np.max(np.abs(z_new), axis=1) + 1e-300
+        delta = float(np.max(np.max(np.abs(z_new - z), axis=1) / scale))
+        z, ch = z_new, new
+        if delta < tol:
+            return z
+    return _step_all(st, inp)
+
+
+def _step_all(st: Stepper, inp: Inputs) -> np.ndarray:
+    """Plain stepping of one run (fallback): states (nz, N)."""
+    N = len(inp.r)
+    z = np.zeros((st.nx + 1, N))
+    x = np.zeros((st.nx, 1))
+    i1 = np.zeros(1)
+    for n in range(N - 1):
+        app = None if inp.app is None else inp.app[n:n + 1]
+        _, _, _, dc, i1 = st.control(x, i1, inp.r[n:n + 1], inp.v[n:n + 1], app)
+        x = st.advance(x, dc, inp.pl[n:n + 1], inp.pl[n + 1:n + 2])
+        z[:st.nx, n + 1] = x[:, 0]
+        z[st.nx, n + 1] = i1[0]
+    return z
+
+
+# ---------------------------------------------------------------------------------------------------
+# Noise streams and batches
+
+
+N_STREAMS = 4
+LOAD, PROCESS, MEAS_P, MEAS_F = range(N_STREAMS)
+
+
+def streams(seed: int) -> list[np.random.Generator]:
+    """Independent generators of one realisation: load, process noise, power and frequency meter noise.
+
+    Separate streams make a source's draws independent of which other sources are switched on, so runs
+    with each source alone (same seed) add up to the run with all of them (the SNR check).
+    """
+    return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(N_STREAMS)]
+
+
+def _draw(gens, stream: int, nb: int, scale: float) -> np.ndarray | None:
+    """(nb, R) scaled standard normals of one stream of every realisation; None when scale is 0."""
+    if not scale > 0:
+        return None
+    out = np.stack([g[stream].standard_normal(nb) for g in gens], axis=1)
+    out *= scale
+    return out
+
+
+def run_batch(plant, N: int, seeds, *, r: np.ndarray, app: np.ndarray | None, sigma_l: float,
+              sigma_v: float, load_det: np.ndarray | None, fields, open_loop: bool = False,
+              nonlinear: bool = True, integrator: Integrator = "exp", substeps: int | None = None,
+              block: int = 2048) -> dict[str, np.ndarray]:
+    """Realisations of ``seeds`` stepped together. Returns the requested :data:`RAW` fields (plus "v",
+    "load") as (N, R) arrays. Draws of each stream are made in blocks, which gives the same numbers as
+    one draw of N (numpy's Generator is sequential)."""
+    seeds = list(seeds)
+    R = len(seeds)
+    st = Stepper(plant, open_loop=open_loop, integrator=integrator, substeps=substeps, nonlinear=nonlinear)
+    m = st.m
+    gens = [streams(s) for s in seeds]
+    fields = tuple(fields)
+    out = {f: np.empty((N, R)) for f in fields}
+    sl = sigma_l * math.sqrt(m.Tc)
+    x = np.zeros((st.nx, R))
+    i1 = np.zeros(R)
+    pl = np.zeros(R)  # stochastic part of ΔP_L at the current knot
+    c_w1, c_w2 = m.C_coi[mdl.W1], m.C_coi[mdl.W2]
+    zeros = np.zeros(R)
+    for n0 in range(0, N, block):
+        nb = min(block, N - n0)
+        xi = _draw(gens, LOAD, nb, sl)
+        ve = _draw(gens, PROCESS, nb, sigma_v)
+        for j in range(nb):
+            n = n0 + j
+            v = ve[j] if ve is not None else zeros
+            a_n = None if app is None else app[n]
+            y, eps, c, dc, i1n = st.control(x, i1, r[n], v, a_n)
+            pl1 = pl + xi[j] if xi is not None else pl
+            if load_det is not None:
+                x_next = st.advance(x, dc, pl + load_det[n], pl1 + load_det[n + 1])
+            else:
+                x_next = st.advance(x, dc, pl, pl1)
+            for f in fields:
+                o = out[f]
+                if f == "y":
+                    o[n] = y
+                elif f == "epsilon":
+                    o[n] = eps
+                elif f == "c":
+                    o[n] = c
+                elif f == "a":
+                    np.add(x[mdl.G1], st.g0, out=o[n])
+                elif f == "u":
+                    o[n] = x[mdl.PF1]
+                elif f == "w_coi":
+                    np.multiply(x[mdl.W1], c_w1, out=o[n])
+                    o[n] += c_w2 * x[mdl.W2]
+                elif f == "pm":
+                    o[n] = mdl.pm1_absolute(m, x) if nonlinear else m.tp1.Pm0 + m.C_pm1 @ x
+                elif f == "omega":
+                    o[n] = x[mdl.W1]
+                elif f == "v":
+                    o[n] = v
+                elif f == "load":
+                    o[n] = pl + (load_det[n] if load_det is not None else 0.0)
+            x, i1, pl = x_next, i1n, pl1
+    return out
+
+
+def run_batch_linear(plant, N: int, seeds, *, r: np.ndarray, app: np.ndarray | None, sigma_l: float,
+                     sigma_v: float, load_det: np.ndarray | None, fields, open_loop: bool = False,
+                     block: int = 2048) -> dict[str, np.ndarray]:
+    """The linear model's batch: one matrix product per sample for states and all outputs."""
+    seeds = list(seeds)
+    R = len(seeds)
+    cl = lin.closed_loop(plant, open_loop)
+    m = cl.model
+    gens = [streams(s) for s in seeds]
+    nz, nw = cl.nz, len(lin.INPUTS)
+    idx = {"y": 0, "epsilon": 1, "c": 2, "a": 3, "u": 4, "w_coi": 5, "pm": 6, "omega": 7}
+    offset = {"c": m.tp1.g0, "a": m.tp1.g0, "pm": m.tp1.Pm0}
+    fields = tuple(fields)
+    rows = [idx[f] for f in fields if f in idx]
+    lin_fields = [f for f in fields if f in idx]
+    Pz = np.hstack([cl.Phi, cl.Gam])
+    Po = np.hstack([cl.C, cl.D])[rows]
+    out = {f: np.empty((N, R)) for f in fields}
+    sl = sigma_l * math.sqrt(m.Tc)
+    U = np.zeros((nz + nw, R))
+    Ux = np.zeros((nz + nw, R))
+    pl = np.zeros(R)
+    zeros = np.zeros(R)
+    for n0 in range(0, N, block):
+        nb = min(block, N - n0)
+        xi = _draw(gens, LOAD, nb, sl)
+        ve = _draw(gens, PROCESS, nb, sigma_v)
+        for j in range(nb):
+            n = n0 + j
+            v = ve[j] if ve is not None else zeros
+            pl1 = pl + xi[j] if xi is not None else pl
+            U[nz] = r[n]
+            U[nz + 1] = v
+            ld0 = load_det[n] if load_det is not None else 0.0
+            ld1 = load_det[n + 1] if load_det is not None else 0.0
+            U[nz + 2] = pl + ld0
+            U[nz + 3] = pl1 + ld1
+            if app is not None:
+                U[nz + 4] = app[n]
+            if rows:
+                o = Po @ U
+                for k, f in enumerate(lin_fields):
+                    out[f][n] = o[k]
+                    if f in offset:
+                        out[f][n] += offset[f]
+            if "v" in out:
+                out["v"][n] = v
+            if "load" in out:
+                out["load"][n] = U[nz + 2]
+            np.matmul(Pz, U, out=Ux[:nz])
+            U[:nz] = Ux[:nz]
+            pl = pl1
+    return out
