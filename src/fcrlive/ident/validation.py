@@ -5,14 +5,16 @@ Correlations are computed per experiment and summed (no products across a gap), 
     r_ε(k)    = R_ε(k)/R_ε(0),                       R_ε(k) = (1/N) Σ ε(t) ε(t−k)
     r_εu(τ)   = R_εu(τ)/sqrt(R_ε(0) R_u(0)),         R_εu(τ) = (1/N) Σ ε(t) u(t−τ)
 
-τ > 0 means ε now vs u in the past: a significant r_εu(τ ≥ 0) says the dynamics from u are not fully
+τ > 0 means ε now vs u in the past: a significant r_εu(τ ≥ nk) says the dynamics from u are not fully
 modelled. τ < 0 (u now vs ε in the past) is correlation through feedback and is expected in closed
-loop; it is reported but not part of the pass/fail decision.
+loop; it is reported but not part of the pass/fail decision (nor are lags τ < nk, see ``resid``).
 
 Pass/fail uses portmanteau statistics rather than "every lag inside its band" (with 25 lags at 99 %
 that rule alone rejects a correct model ~22 % of the time):
   whiteness:      Q = N Σ_{k=1..M} r_ε(k)²  ~ χ²(M − nc − nd)
-  independence:   S = N r̂ᵀ R̄_u⁻¹ r̂ over τ = 0..M ~ χ²(M + 1)   (R̄_u the normalised input Toeplitz matrix)
+  independence:   S = N r̂ᵀ P⁻¹ r̂ over τ = nk_i..M ~ χ²(M + 1 − nk_i), P_{τ1τ2} = Σ_k r_ε(k) r_u(k+τ2−τ1)
+                  (the covariance of the cross-correlations when ε and u are independent; P is the
+                  input's Toeplitz matrix when ε is white, as in the toolbox's band sqrt(P/N)).
 The per-lag bands (±z/√N, z for the chosen confidence) are returned for plots as in ``resid``.
 """
 
@@ -22,7 +24,6 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.stats as stats
 
 from fcrlive.ident.data import IdData
@@ -96,18 +97,30 @@ def resid(model: PolyModel, data: IdData, max_lag: int = 25, confidence: float =
     q = n * float(np.sum(r_e[1:] ** 2))
     white_p = float(stats.chi2.sf(q, dof_w))
     outside.append(int(np.sum(np.abs(r_e[1:]) > band)))
+    kk = np.arange(-M, M + 1)
+    taper = 1.0 - np.abs(kk) / (M + 1)  # Bartlett weights keep the covariance estimate positive
+    re_sym = r_e[np.abs(kk)] * taper
     for i in range(data.nu):
-        u_segs = [u[:, i] - 0.0 for _, u in data.segments()]
-        ru = _xcorr_sum(u_segs, u_segs, lags) / n
+        u_segs = [u[:, i] for _, u in data.segments()]
+        ru = _xcorr_sum(u_segs, u_segs, np.arange(3 * M + 2)) / n
         reu = _xcorr_sum(e_segs, u_segs, xl) / n
         xc[i] = reu / np.sqrt(re[0] * ru[0])
-        pos = xc[i, M:]
-        T = sla.toeplitz(ru / ru[0])
+        r_u = ru / ru[0]
+        # lags τ ≥ nk_i: below the delay the model has no term, and in closed loop with a direct
+        # feed-through controller ε(t) and u(t) are correlated through the feedback anyway
+        k0 = model.nk[i] if i < model.nu else 0
+        taus = np.arange(k0, M + 1)
+        pos = xc[i, M + taus]
+        # Cov of √N r̂_εu(τ1), √N r̂_εu(τ2) for ε independent of u: Σ_k r_ε(k) r_u(k + τ2 − τ1)
+        diff = taus[None, :] - taus[:, None]
+        P = np.zeros((taus.size, taus.size))
+        for k, w in zip(kk, re_sym):
+            P += w * r_u[np.abs(k + diff)]
         try:
-            s = n * float(pos @ np.linalg.solve(T, pos))
+            s = n * float(pos @ np.linalg.solve(P, pos))
         except np.linalg.LinAlgError:
-            s = n * float(pos @ np.linalg.lstsq(T, pos, rcond=None)[0])
-        p = float(stats.chi2.sf(s, M + 1))
+            s = n * float(pos @ np.linalg.lstsq(P, pos, rcond=None)[0])
+        p = float(stats.chi2.sf(s, taus.size))
         ind_p.append(p)
         ind_ok.append(p > 1 - confidence)
         outside.append(int(np.sum(np.abs(pos) > band)))
