@@ -30,6 +30,7 @@ class RegisterServer:
         self.requests = 0
         self._server: ModbusTcpServer | None = None
         self._values: dict[str, float] = {}
+        self._internal = False
 
     def _device(self) -> SimDevice:
         blocks = {"input": [], "holding": []}
@@ -45,6 +46,8 @@ class RegisterServer:
                          action=self._action)
 
     async def _action(self, function_code, start_address, address, count, current_registers, set_values):
+        if self._internal:  # our own set(): the hook sees it too, never hang on it
+            return None
         self.requests += 1
         while self.hang:
             await asyncio.sleep(0.01)
@@ -80,7 +83,11 @@ class RegisterServer:
         for name, v in values.items():
             p = self.map.point(name)
             regs = encode_point(p, v, self.map.word_order, self.map.byte_order)
-            await self._server.async_setValues(self.map.unit_id, _FC[p.table], p.address, regs)
+            self._internal = True
+            try:
+                await self._server.async_setValues(self.map.unit_id, _FC[p.table], p.address, regs)
+            finally:
+                self._internal = False
 
     async def get_registers(self, table: str, address: int, count: int) -> list[int]:
         """Raw registers as the server holds them."""
