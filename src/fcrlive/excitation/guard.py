@@ -209,7 +209,10 @@ class GuardDecision:
     """
 
     t_s: float
-    """The guard's monotonic time [s] (0 at the first step; does not advance on invalid/backward time)."""
+    """The guard's monotonic time τ [s] (0 at the first step; does not advance on invalid/backward time)."""
+    dt_s: float
+    """Time credited at this step [s]: now − previous accepted now, 0 on invalid or backward time, at most
+    one day after a gap. The rate limit is applied over this."""
     value_hz: float
     requested_hz: float
     """The request as received (may be NaN/inf: it is only recorded)."""
@@ -381,6 +384,9 @@ class SafetyGuard:
                     dt = 0.0
                 elif dt > lim.stale_after_s:
                     reasons.add(STEP_GAP)  # nobody called us: the writer loop stalled
+                    # Credit at most one budget window: enough to expire the whole ledger, and it keeps τ
+                    # small enough that later steps of milliseconds still advance it (1e300 + 0.1 == 1e300).
+                    dt = min(dt, BUDGET_WINDOW_S)
             if INVALID_TIME not in reasons:
                 self._last_now = now
         self._tau += dt
@@ -497,8 +503,9 @@ class SafetyGuard:
         inhibited = hard or bool(reasons & {HOLDOFF, BUDGET_EXHAUSTED})
         active = not inhibited and not self._stop_requested
         decision = GuardDecision(
-            t_s=self._tau, value_hz=value, requested_hz=requested, active=active, inhibited=inhibited,
-            reasons=tuple(sorted(reasons)), clamped=clamped and active, rate_limited=rate_limited)
+            t_s=self._tau, dt_s=dt, value_hz=value, requested_hz=requested, active=active,
+            inhibited=inhibited, reasons=tuple(sorted(reasons)), clamped=clamped and active,
+            rate_limited=rate_limited)
 
         prev_reasons = set(self._prev.reasons) if self._prev is not None else set()
         for r in reasons - prev_reasons:
