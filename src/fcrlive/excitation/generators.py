@@ -194,8 +194,9 @@ class WhiteNoiseGenerator(ExcitationGenerator):
     @classmethod
     def paper(cls, seed: int = 0, sample_time_s: float = 0.02) -> WhiteNoiseGenerator:
         """The paper's excitation: σ = 0.1/(50·3) pu of 50 Hz, truncated at 3σ = 0.1 Hz."""
-        return cls(amplitude_hz=PAPER_EXCITATION_STD_PU * F0_HZ * 3.0, sample_time_s=sample_time_s, seed=seed,
-                   sigma_factor=3.0)
+        # 3·PAPER_EXCITATION_STD_PU·F0_HZ is 0.1 Hz up to rounding, which would fail the ≤ 0.1 Hz check
+        assert math.isclose(3.0 * PAPER_EXCITATION_STD_PU * F0_HZ, 0.1)
+        return cls(amplitude_hz=0.1, sample_time_s=sample_time_s, seed=seed, sigma_factor=3.0)
 
     def _samples(self, start: int, n: int) -> np.ndarray:
         if n == 0:
@@ -250,15 +251,11 @@ class PrbsGenerator(ExcitationGenerator):
         c0 = start // self.clock_samples
         c_next = (start + n) // self.clock_samples
         reg = self._register
-        bits = []
-        for _ in range(c_next - c0 + 1):
-            bits.append(reg & 1)
-            reg = self._shift(reg)
-        # Keep the register at the clock count of the next sample.
-        reg = self._register
+        bits = [reg & 1]
         for _ in range(c_next - c0):
             reg = self._shift(reg)
-        self._register = reg
+            bits.append(reg & 1)
+        self._register = reg  # the register at the clock count of the next sample
         b = np.asarray(bits, dtype=float)[np.arange(start, start + n) // self.clock_samples - c0]
         return self.amplitude_hz * (2.0 * b - 1.0)
 
@@ -332,10 +329,11 @@ class MultisineGenerator(ExcitationGenerator):
         bins = [round(record_s / p) for p in self.periods_requested_s]
         for p, k in zip(self.periods_requested_s, bins):
             if k < 1 or k >= N / 2:
-                raise _err("periods_s", f"period {p!r} s does not fit a record of {N} samples × "
-                           f"{self.sample_time_s!r} s (bin {k}; need 1 ≤ bin < N/2)")
+                raise _err("periods_s", f"periods_s: period {p!r} s does not fit a record of "
+                           f"record_samples = {N} × sample_time_s = {self.sample_time_s!r} s "
+                           f"(bin {k}; need 1 ≤ bin < N/2)")
         if len(set(bins)) != len(bins):
-            raise _err("record_samples", f"record of {record_s!r} s is too short: periods "
+            raise _err("record_samples", f"record_samples: a record of {record_s!r} s is too short: periods "
                        f"{self.periods_requested_s} round to colliding bins {bins}")
         self.bins = tuple(int(k) for k in bins)
         self.periods_s = tuple(record_s / k for k in self.bins)
