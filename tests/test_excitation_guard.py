@@ -70,6 +70,8 @@ def test_unsafe_limits_are_rejected_naming_the_field(field, value):
 def test_coupled_limits_are_checked():
     with pytest.raises(ConfigError, match="band_hysteresis_hz"):
         GuardLimits(band_hz=0.05, band_hysteresis_hz=0.05)
+    with pytest.raises(ConfigError, match="budget_s_per_day"):  # shorter than the 10 s stop ramp
+        GuardLimits(budget_s_per_day=5.0, budget_resume_s=1.0, amplitude_hz=0.1, rate_limit_hz_per_s=0.01)
     with pytest.raises(ConfigError, match="budget_resume_s"):
         GuardLimits(budget_s_per_day=100.0, budget_resume_s=200.0)
 
@@ -284,7 +286,7 @@ limits_st = st.builds(
     GuardLimits,
     amplitude_hz=st.floats(0.001, 0.1),
     rate_limit_hz_per_s=st.floats(0.01, 5.0),
-    budget_s_per_day=st.floats(2.0, 60.0),
+    budget_s_per_day=st.floats(10.5, 60.0),
     budget_resume_s=st.just(1.0),
     band_hz=st.floats(0.02, 0.1),
     band_hysteresis_hz=st.just(0.005),

@@ -173,6 +173,10 @@ class GuardLimits:
         if self.budget_resume_s > self.budget_s_per_day:
             raise _limit_error("budget_resume_s", f"budget_resume_s = {self.budget_resume_s!r} must not "
                                f"exceed budget_s_per_day = {self.budget_s_per_day!r}")
+        if self.budget_s_per_day <= self.stop_time_bound_s:
+            raise _limit_error("budget_s_per_day", f"budget_s_per_day = {self.budget_s_per_day!r} s must "
+                               "exceed the stop ramp amplitude_hz/rate_limit_hz_per_s = "
+                               f"{self.stop_time_bound_s!r} s")
         if self.band_hysteresis_hz >= self.band_hz:
             raise _limit_error("band_hysteresis_hz", f"band_hysteresis_hz = {self.band_hysteresis_hz!r} "
                                f"must be below band_hz = {self.band_hz!r}")
@@ -466,7 +470,8 @@ class SafetyGuard:
         remaining = lim.budget_s_per_day - self.budget_used_s()
         if not self._budget_exhausted and remaining <= lim.stop_time_bound_s:
             self._budget_exhausted = True
-        elif self._budget_exhausted and remaining >= lim.budget_resume_s + lim.stop_time_bound_s:
+        elif self._budget_exhausted and remaining >= min(lim.budget_s_per_day,
+                                                         lim.budget_resume_s + lim.stop_time_bound_s):
             self._budget_exhausted = False
         if self._budget_exhausted:
             reasons.add(BUDGET_EXHAUSTED)
