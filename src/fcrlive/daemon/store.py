@@ -108,6 +108,8 @@ class Window:
     seq: np.ndarray
     quality: np.ndarray
     signals: dict[str, np.ndarray]
+    run: np.ndarray | None = None
+    """Daemon run id of each sample (``seq`` restarts with every run)."""
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -162,13 +164,14 @@ def read_window(con: sqlite3.Connection, t1: float, t2: float,
                 signals: Sequence[str] | None = None) -> Window:
     """Every stored sample with ``t1 ≤ t ≤ t2`` [UNIX s]; ``signals`` default to all columns."""
     cols = tuple(signals) if signals is not None else signal_columns(con)
-    sel = ", ".join(("t", "t_device", "seq", "quality", *(_q(c) for c in cols)))
+    sel = ", ".join(("t", "t_device", "seq", "quality", "run", *(_q(c) for c in cols)))
     rows = con.execute(f"SELECT {sel} FROM samples WHERE t >= ? AND t <= ? ORDER BY t", (t1, t2)).fetchall()
-    arr = np.array(rows, dtype=float).reshape(len(rows), 4 + len(cols))
+    arr = np.array(rows, dtype=float).reshape(len(rows), 5 + len(cols))
     return Window(
         t1=t1, t2=t2, t=arr[:, 0], t_device=arr[:, 1], seq=arr[:, 2],
         quality=np.nan_to_num(arr[:, 3], nan=Quality.MISSING).astype(np.int8),
-        signals={c: arr[:, 4 + i] for i, c in enumerate(cols)},
+        signals={c: arr[:, 5 + i] for i, c in enumerate(cols)},
+        run=np.nan_to_num(arr[:, 4], nan=-1).astype(np.int64),
     )
 
 
