@@ -12,11 +12,12 @@ The step map (:class:`Stepper`) takes the state at t_n = n Tc to t_{n+1}:
 
 Integrators for step 2 (``integrator``):
 
-- ``"exp"`` (default): exponential (ETD-RK2, "exponential Heun") integrator. The linear part
-  ``A x + B_c Δc + B_L ΔP_L``, which carries all the dynamics that matter at the 0.01-1 Hz of interest,
-  is integrated EXACTLY (matrix exponential, the same discretisation as the linear model); only the
-  small nonlinear residual N(x) (turbine head curvature, limiters) is integrated to second order. One
-  matrix product and two residual evaluations per step.
+- ``"exp"`` (default): exponential integrator. The linear part ``A x + B_c Δc + B_L ΔP_L``, which
+  carries all the dynamics, is integrated EXACTLY (matrix exponential, the same discretisation as the
+  linear model, load with a first-order hold); only the small nonlinear residual N(x) (turbine head
+  curvature, limiters) is approximated, by its linear extrapolation from N(x[n−1]) and N(x[n]) over
+  the step (second order, the exponential Adams-Bashforth ETD2 scheme; N(x[−1]) := N(x[0])). One
+  matrix product and one residual evaluation per step.
 - ``"rk4"``: classic RK4 on the full right-hand side with ``substeps`` per controller sample
   (default: enough for h ≤ 0.02 s; the fastest eigenvalues are about −25 1/s). A cross-check.
 
@@ -61,9 +62,8 @@ class Stepper:
         self.k = m.ctl1
         self.kt = m.Tc * m.ctl1.Ki
         nx = m.nx
-        # x* = P @ [x; Δc; ΔP_L[n]; ΔP_L[n+1] − ΔP_L[n]; N(x)]
-        self.P = np.hstack([m.Phi, m.Gc[:, None], m.GL0[:, None], m.GL1[:, None], m.GN0])
-        self.GN1 = m.GN1
+        # x[n+1] = P @ [x; Δc; ΔP_L[n]; ΔP_L[n+1] − ΔP_L[n]; N(x[n]); N(x[n]) − N(x[n−1])]
+        self.P = np.hstack([m.Phi, m.Gc[:, None], m.GL0[:, None], m.GL1[:, None], m.GN0, m.GN1])
         self.nx = nx
         if integrator == "rk4":
             if substeps is None:
@@ -91,43 +91,48 @@ class Stepper:
         inc = k.ie * eps + k.ii * i1
         if k.ig != 0.0:
             inc = inc + k.ig * x[mdl.G1]
-        if self.nonlinear:
-            c = np.clip(dcr + self.g0, self.g_min, self.g_max)
+        c = dcr + self.g0
+        if self.nonlinear and (np.max(c) > self.g_max or np.min(c) < self.g_min):
+            c = np.minimum(np.maximum(c, self.g_min), self.g_max)
             dc = c - self.g0
             # Conditional integration: no integrating further into a limit (anti-windup).
             sat = c != dcr + self.g0
-            inc_lin = inc
-            if np.any(sat):
-                inc = np.where(sat & ((dc - dcr) * inc < 0.0), 0.0, inc)
+            i1n_lin = i1 + self.kt * inc
+            inc = np.where(sat & ((dc - dcr) * inc < 0.0), 0.0, inc)
             i1n = i1 + self.kt * inc
-            i1n_lin = i1n if not np.any(sat) else i1 + self.kt * inc_lin
         else:
             dc = dcr
-            c = dcr + self.g0
             i1n = i1n_lin = i1 + self.kt * inc
         return y, eps, c, dc, i1n, dcr, i1n_lin
 
     # -- the continuous plant over one sample -------------------------------------------------------
-    def advance(self, x: np.ndarray, dc, pl0, pl1) -> np.ndarray:
+    def advance(self, x: np.ndarray, dc, pl0, pl1, n_prev: np.ndarray | None = None):
+        """(x[n+1], N(x[n])): one sample with Δc held and the load linear from pl0 to pl1.
+
+        ``n_prev`` is N(x[n−1]) from the previous call (None at the first step); the second element of
+        the result is None for the linear model and for RK4.
+        """
         m = self.m
         if self.integrator == "rk4":
-            return self._rk4(x, dc, pl0, pl1)
+            return self._rk4(x, dc, pl0, pl1), None
         R = x.shape[1]
         nx = self.nx
-        U = np.empty((nx + 8, R))
+        nN = len(mdl.RESIDUAL_ROWS)
+        U = np.empty((nx + 3 + 2 * nN, R))
         U[:nx] = x
         U[nx] = dc
         U[nx + 1] = pl0
         np.subtract(pl1, pl0, out=U[nx + 2])
         if not self.nonlinear:
             U[nx + 3:] = 0.0
-            return self.P @ U
-        mdl.residual(m, x, out=U[nx + 3:])
-        xs = self.P @ U
-        N1 = mdl.residual(m, xs)
-        N1 -= U[nx + 3:]
-        xs += self.GN1 @ N1
-        return xs
+            return self.P @ U, None
+        N = U[nx + 3:nx + 3 + nN]
+        mdl.residual(m, x, out=N)
+        if n_prev is None:
+            U[nx + 3 + nN:] = 0.0
+        else:
+            np.subtract(N, n_prev, out=U[nx + 3 + nN:])
+        return self.P @ U, N.copy()
 
     def _f(self, x, dc, pl):
         m = self.m
@@ -215,7 +220,7 @@ def run_single(plant, inp: Inputs, *, open_loop: bool = False, nonlinear: bool =
         for _ in range(max_iter):
             x, i1 = z[:nx], z[nx]
             _, _, _, dc, i1n = st.control(x, i1, inp.r, inp.v, inp.app)
-            xn = st.advance(x, dc, inp.pl[:-1], inp.pl[1:])
+            xn = st.advance(x, dc, inp.pl[:-1], inp.pl[1:])[0]
             S = np.vstack([xn, i1n[None]])
             d = S - cl.Phi @ z
             z_new = lin.recursion(cl.Phi, d)
@@ -233,10 +238,9 @@ def _fixed_point_exp(st: Stepper, cl, inp: Inputs, z_lin: np.ndarray, tol: float
                      max_iter: int) -> np.ndarray:
     """The waveform fixed point for the exponential integrator, iterating on the nonlinear correction.
 
-    Each step is the linear closed-loop step plus δ[n] = GN0 N0 + GN1 (N1 − N0) + Gc Δc_lim + e_i Δi_lim
-    (residuals at x[n] and at the predictor x*[n], limiter corrections). With the current iterate
-    z[n+1] = (linear step) + δ_prev[n], the predictor is z[n+1] − δ_prev[n] + GN0 N0 + Gc Δc_lim on x's
-    rows, so no full step map is evaluated; z = z_lin + recursion(δ).
+    Each step is the linear closed-loop step plus δ[n] = GN0 N[n] + GN1 (N[n] − N[n−1]) + Gc Δc_lim +
+    e_i Δi_lim (residuals and limiter corrections along the current iterate), so z = z_lin + recursion(δ)
+    with δ evaluated for all samples at once.
     """
     m, nx = st.m, st.nx
     nz, N = z_lin.shape
@@ -244,30 +248,26 @@ def _fixed_point_exp(st: Stepper, cl, inp: Inputs, z_lin: np.ndarray, tol: float
     if md is None:
         return _step_all(st, inp)
     nN = len(mdl.RESIDUAL_ROWS)
-    Gch = np.zeros((nz, 2 * nN + 2))  # channels: N0, N1 − N0, Δc_lim, Δi_lim
+    Gch = np.zeros((nz, 2 * nN + 2))  # channels: N, N − N[n−1], Δc_lim, Δi_lim
     Gch[:nx, :nN] = m.GN0
     Gch[:nx, nN:2 * nN] = m.GN1
     Gch[:nx, 2 * nN] = m.Gc
     Gch[nx, 2 * nN + 1] = 1.0
     proj = md.proj @ Gch
-    Gx = Gch[:nx]
-    ch = np.zeros((2 * nN + 2, N))
+    ch = np.empty((2 * nN + 2, N))
     z = z_lin
     for _ in range(max_iter):
         x, i1 = z[:nx], z[nx]
         _, _, _, dc, i1n, dcr, i1n_lin = st.control_full(x, i1, inp.r, inp.v, inp.app)
-        new = np.empty_like(ch)
-        mdl.residual(m, x, out=new[:nN])
-        new[nN:2 * nN] = 0.0
-        np.subtract(dc, dcr, out=new[2 * nN])
-        np.subtract(i1n, i1n_lin, out=new[2 * nN + 1])
-        xs = z[:nx, 1:] + Gx @ (new - ch)[:, :-1]
-        N1 = mdl.residual(m, xs)
-        np.subtract(N1, new[:nN, :-1], out=new[nN:2 * nN, :-1])
-        z_new = z_lin + lin.filter_projected(md, proj @ new)
+        Nn = mdl.residual(m, x, out=ch[:nN])
+        ch[nN:2 * nN, 0] = 0.0
+        np.subtract(Nn[:, 1:], Nn[:, :-1], out=ch[nN:2 * nN, 1:])
+        np.subtract(dc, dcr, out=ch[2 * nN])
+        np.subtract(i1n, i1n_lin, out=ch[2 * nN + 1])
+        z_new = z_lin + lin.filter_projected(md, proj @ ch)
         scale = np.max(np.abs(z_new), axis=1) + 1e-300
         delta = float(np.max(np.max(np.abs(z_new - z), axis=1) / scale))
-        z, ch = z_new, new
+        z = z_new
         if delta < tol:
             return z
     return _step_all(st, inp)
@@ -279,10 +279,11 @@ def _step_all(st: Stepper, inp: Inputs) -> np.ndarray:
     z = np.zeros((st.nx + 1, N))
     x = np.zeros((st.nx, 1))
     i1 = np.zeros(1)
+    n_prev = None
     for n in range(N - 1):
         app = None if inp.app is None else inp.app[n:n + 1]
         _, _, _, dc, i1 = st.control(x, i1, inp.r[n:n + 1], inp.v[n:n + 1], app)
-        x = st.advance(x, dc, inp.pl[n:n + 1], inp.pl[n + 1:n + 2])
+        x, n_prev = st.advance(x, dc, inp.pl[n:n + 1], inp.pl[n + 1:n + 2], n_prev)
         z[:st.nx, n + 1] = x[:, 0]
         z[st.nx, n + 1] = i1[0]
     return z
@@ -334,6 +335,7 @@ def run_batch(plant, N: int, seeds, *, r: np.ndarray, app: np.ndarray | None, si
     pl = np.zeros(R)  # stochastic part of ΔP_L at the current knot
     c_w1, c_w2 = m.C_coi[mdl.W1], m.C_coi[mdl.W2]
     zeros = np.zeros(R)
+    n_prev = None
     for n0 in range(0, N, block):
         nb = min(block, N - n0)
         xi = _draw(gens, LOAD, nb, sl)
@@ -345,9 +347,9 @@ def run_batch(plant, N: int, seeds, *, r: np.ndarray, app: np.ndarray | None, si
             y, eps, c, dc, i1n = st.control(x, i1, r[n], v, a_n)
             pl1 = pl + xi[j] if xi is not None else pl
             if load_det is not None:
-                x_next = st.advance(x, dc, pl + load_det[n], pl1 + load_det[n + 1])
+                x_next, n_prev = st.advance(x, dc, pl + load_det[n], pl1 + load_det[n + 1], n_prev)
             else:
-                x_next = st.advance(x, dc, pl, pl1)
+                x_next, n_prev = st.advance(x, dc, pl, pl1, n_prev)
             for f in fields:
                 o = out[f]
                 if f == "y":

@@ -89,6 +89,7 @@ class RealtimeSimulator:
         self._x = np.zeros((self._st.nx, 1))
         self._i1 = np.zeros(1)
         self._pl = 0.0
+        self._nprev: np.ndarray | None = None
         self._n = 0
         self._buf: dict[int, np.ndarray] = {}
         self._pos = _BLOCK
@@ -119,7 +120,7 @@ class RealtimeSimulator:
         v = self.process_noise_std * e_v
         y, eps, c, dc, i1n = st.control(x, self._i1, r, v, None)
         pl1 = self._pl + self._sl * e_l
-        x_next = st.advance(x, dc, np.array([self._pl]), np.array([pl1]))
+        x_next, self._nprev = st.advance(x, dc, np.array([self._pl]), np.array([pl1]), self._nprev)
         xs = x[:, 0]
         u = float(xs[_mdl.PF1]) + self.meas_noise_power * e_p
         f = self.f0 * (1.0 + self._cw1 * float(xs[_mdl.W1]) + self._cw2 * float(xs[_mdl.W2]))
