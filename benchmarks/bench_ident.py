@@ -116,7 +116,7 @@ def _plain_lm(data: IdData) -> float:
     try:
         res = least_squares(fun, th0, jac=jac, method="lm", max_nfev=2000)
         return float(np.mean(res.fun ** 2))
-    except Exception:  # noqa: BLE001 — a diverged search counts as a failure
+    except Exception:  # a diverged search counts as a failure
         return np.inf
 
 
@@ -136,8 +136,8 @@ def _hard_run(seed: int):
 
 
 def robustness(runs: int, workers: int) -> None:
-    print(f"\n## Robustness: hard closed-loop case, {runs} runs: plant poles 0.98/0.95, nk=3, noise pole 0.995, "
-          f"C zero -0.5, Kp={HARD_KP}, N={HARD_N}, σ_e={HARD_SIGMA}")
+    print(f"\n## Robustness: hard closed-loop case, {runs} runs: plant poles 0.98/0.95, nk=3, "
+          f"noise pole 0.995, C zero -0.5, Kp={HARD_KP}, N={HARD_N}, σ_e={HARD_SIGMA}")
     t0 = time.perf_counter()
     with mp.get_context("fork").Pool(workers, initializer=_init_worker) as pool:
         out = pool.map(_hard_run, range(5000, 5000 + runs))

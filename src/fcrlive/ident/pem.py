@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 import scipy.signal as sps
+import scipy.stats as stats
 
 from fcrlive.ident.arx import arx, per_input
 from fcrlive.ident.data import IdData
@@ -442,6 +443,31 @@ def _start_whitened(st: _Struct, segs, ha: PolyModel, n_ar: int) -> np.ndarray:
     return _add_noise_model(st, segs, Bs, Fs, n_ar)
 
 
+def _real_roots(st: _Struct, th: np.ndarray) -> np.ndarray:
+    """A restart with every complex pair of F_i replaced by two real roots ρ and ρ⁸ (ρ its radius).
+
+    A lightly damped complex pair near z = 1 is a typical local minimum when the true slow poles are
+    real (seen on the hard closed-loop case); the static gain is kept.
+    """
+    B, F, C, D = st.polys(th)
+    B2, F2 = [], []
+    for i in range(st.nu):
+        r = np.roots(F[i]) if F[i].size > 1 else np.zeros(0)
+        cplx = r[np.abs(r.imag) > 1e-9]
+        if cplx.size == 0:
+            B2.append(B[i])
+            F2.append(F[i])
+            continue
+        real = list(r[np.abs(r.imag) <= 1e-9].real)
+        for z in cplx[cplx.imag > 0]:
+            rho = min(abs(z), 0.995)
+            real += [rho, rho**8]
+        Fi = np.real(np.poly(real))
+        B2.append(B[i] * (np.sum(Fi) / np.sum(F[i]) if np.sum(F[i]) != 0 else 1.0))
+        F2.append(Fi)
+    return st.pack(B2, F2, C, D)
+
+
 def _perturbed(st: _Struct, th: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """A restart near ``th``: F_i, C and D roots moved radially (kept inside), B rescaled to keep DC."""
     B, F, C, D = st.polys(th)
@@ -541,6 +567,8 @@ def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, mult
         n_high = int(np.clip(n // (40 * (data.nu + 1)), 4, 30))
     n_high = int(min(n_high, max(1, (n - 1) // (2 * (data.nu + 1)) - 1), max(1, lmin // 3)))
     arx_loss = np.nan
+    arx_rows = np.zeros(0, int)
+    lr_limit = np.inf
     n_ar = int(min(n_high, max(2, lmin // 4)))
     lazy = []
     if init is not None:
@@ -548,8 +576,18 @@ def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, mult
     else:
         ha = arx(data, max(n_high, max(st.nf) + max(st.nb), 2), max(n_high, max(st.nb) + 1), st.nk)
         arx_loss = ha.report.loss
+        # the rows the ARX loss is computed on (its initial samples of each experiment left out)
+        n0 = max(ha.na, *(k + m - 1 for k, m in zip(ha.nk, ha.nb)))
+        arx_rows = np.concatenate([np.arange(a + n0, b) for a, b in data.bounds])
+        lr_limit = float(stats.chi2.ppf(0.95, max(ha.n_params - st.p, 1)))
         starts = [_start_simulated(st, segs, ha, n_ar)]
         lazy.append(lambda: _start_whitened(st, segs, ha, n_ar))
+        if ha.na > 8:
+            # a shorter whitening ARX leads the Steiglitz-McBride start into another basin at times
+            lazy.append(lambda: _start_simulated(
+                st, segs, arx(data, max(ha.na // 2, max(st.nf) + max(st.nb), 2), max(ha.nb[0] // 2,
+                                                                                     max(st.nb) + 1), st.nk),
+                n_ar))
     if not np.all(np.isfinite(starts[0])) or not _stable(st, starts[0]):
         raise UnstableModelError(f"initial {method.upper()} model could not be stabilised")
     results: list[_SearchResult] = [_search(st, starts[0], segs, maxiter, tol)]
@@ -558,13 +596,23 @@ def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, mult
     def stalled(r: _SearchResult) -> bool:
         if not r.converged:
             return True
-        # the high-order ARX's loss is a near lower bound of the achievable innovation variance:
-        # a BJ/OE loss clearly above it means a local minimum (or a too-low model order)
-        return bool(np.isfinite(arx_loss) and method == "bj" and r.ssr / n > arx_loss * 1.02)
+        # a root pinned at the stability boundary: the search was stopped by the guard, not by a minimum
+        _, F, C, D = st.polys(r.theta)
+        if max(_max_root(q) for q in (*F, C, D)) > 1.0 - 1e-4:
+            return True
+        if not (np.isfinite(arx_loss) and method == "bj"):
+            return False
+        # likelihood-ratio test of the BJ fit against the high-order ARX on the same rows: at the global
+        # minimum of a right structure N·log(V_bj/V_arx) ~ χ²(p_arx − p_bj); far above it means a local
+        # minimum (or too low orders, in which case the restarts only cost time)
+        e, _ = _eval(st, r.theta, segs, False)
+        v_bj = float(np.mean(e[arx_rows] ** 2))
+        return bool(arx_rows.size * np.log(v_bj / arx_loss) > lr_limit)
 
     if multistart is True or (multistart == "auto" and stalled(best)):
         rng = np.random.default_rng(seed)
-        extra = [*lazy, *(lambda: _perturbed(st, best.theta, rng) for _ in range(3))]
+        extra = [lambda: _real_roots(st, best.theta), *lazy,
+                 *(lambda: _perturbed(st, best.theta, rng) for _ in range(3))]
         for make in extra:
             s = make()
             if not (np.all(np.isfinite(s)) and _stable(st, s)):
