@@ -148,3 +148,19 @@ def test_sine_result_to_period_suffixed_log(tmp_path):
     s = plant_signals(read_log(path), RATED)
     assert s.period_s == 40.0 and s.has_excitation
     np.testing.assert_allclose(s.epsilon, res.epsilon[::5], atol=1.1e-8)
+
+
+def test_real_simulation_through_a_file_gives_the_governors_signals(tmp_path):
+    from fcrlive.plant.params import preset
+    from fcrlive.sim import SimConfig, simulate
+
+    sim = simulate(preset("paper-plant1"), SimConfig(duration_s=60.0, excitation=True, seed=2))
+    back = read_log(write_log(tmp_path / "sim.csv", log_from_sim(sim)))
+    s = plant_signals(back, sim.rated_mw, f0=sim.f0, p0_mw=sim.p0_mw)
+    assert s.has_excitation and len(s) == sim.n
+    np.testing.assert_allclose(s.y, sim.y, atol=1.1e-8, rtol=0)
+    np.testing.assert_allclose(s.r, sim.r, atol=2.1e-8, rtol=0)
+    np.testing.assert_allclose(s.epsilon, sim.epsilon, atol=1.1e-8, rtol=0)
+    np.testing.assert_allclose(s.u, sim.u, atol=2e-9, rtol=0)
+    np.testing.assert_allclose(s.c, sim.c, atol=1e-8, rtol=0)
+    np.testing.assert_allclose(s.a, sim.a, atol=1e-8, rtol=0)

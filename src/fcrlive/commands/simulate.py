@@ -9,6 +9,7 @@ period, TestType ``Sine<period>``.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from datetime import datetime, timedelta
 from pathlib import Path
@@ -37,9 +38,8 @@ def configure(p: argparse.ArgumentParser) -> None:
         default=20,
         help="logging interval [ms], a whole multiple of the controller sample time (default 20)",
     )
-    p.add_argument(
-        "--out", type=Path, metavar="FILE.csv|DIR", help="normal-operation log; a directory gets a TSO name"
-    )
+    # a str, not a Path: Path("out/") drops the trailing slash that says "directory"
+    p.add_argument("--out", metavar="FILE.csv|DIR", help="normal-operation log; a directory gets a TSO name")
     p.add_argument(
         "--sine-tests", type=Path, metavar="DIR", help="write one sine-test log per TSO period here"
     )
@@ -73,6 +73,16 @@ def _summary(path: Path, log) -> str:
     )
 
 
+def _write(path: Path, log) -> Path:
+    from fcrlive.errors import UserError
+    from fcrlive.tso.csvlog import write_log
+
+    try:
+        return write_log(path, log)
+    except OSError as exc:
+        raise UserError(f"cannot write the log: {exc.strerror or exc}", where=str(path)) from None
+
+
 def _next_minute(t: datetime) -> datetime:
     up = t.replace(second=0, microsecond=0)
     return up if up == t else up + timedelta(minutes=1)
@@ -81,7 +91,6 @@ def _next_minute(t: datetime) -> datetime:
 def run(args: argparse.Namespace) -> int:
     from fcrlive.constants import TSO_PERIODS_S
     from fcrlive.errors import UserError
-    from fcrlive.tso.csvlog import write_log
     from fcrlive.tso.names import sine_test_type, tso_filename
     from fcrlive.tso.signals import log_from_sim, log_from_sine
 
@@ -101,35 +110,45 @@ def run(args: argparse.Namespace) -> int:
 
     from fcrlive.sim import SimConfig, simulate, sine_test
 
-    def config(duration_s: float, excitation: bool):
-        return SimConfig(duration_s=duration_s, snr_db=args.snr_db, excitation=excitation, seed=args.seed)
+    out_dir = None
+    if args.out is not None:
+        # Check where the log goes before spending time on the simulation.
+        if Path(args.out).is_dir() or args.out.endswith(("/", os.sep)):
+            out_dir = Path(args.out)
+        elif not Path(args.out).parent.is_dir():
+            raise UserError(f"directory {Path(args.out).parent} does not exist", where="--out")
+    if args.sine_tests is not None and args.sine_tests.exists() and not args.sine_tests.is_dir():
+        raise UserError(f"{args.sine_tests} exists and is not a directory", where="--sine-tests")
 
     if args.out is not None:
-        result = simulate(plant, config(args.minutes * 60.0, args.excitation))
+        config = SimConfig(
+            duration_s=args.minutes * 60.0, snr_db=args.snr_db, excitation=args.excitation, seed=args.seed
+        )
+        result = simulate(plant, config)
         log = log_from_sim(result, start=start, sample_s=sample_s, excitation=args.excitation)
-        out = args.out
-        if out.is_dir() or str(out).endswith(("/", "\\")):
-            out.mkdir(parents=True, exist_ok=True)
+        out = Path(args.out)
+        if out_dir is not None:
+            out_dir.mkdir(parents=True, exist_ok=True)
             end = start + timedelta(seconds=log.duration_s + sample_s)
-            out = out / tso_filename(RESOURCE, SERVICE, "Operation", AREA, TIMEZONE, start, end, sample_s)
-        elif not out.parent.is_dir():
-            raise UserError(f"directory {out.parent} does not exist", where="--out")
-        write_log(out, log)
+            out = out_dir / tso_filename(RESOURCE, SERVICE, "Operation", AREA, TIMEZONE, start, end, sample_s)
+        _write(out, log)
         print(_summary(out, log))
 
     if args.sine_tests is not None:
         folder = args.sine_tests
-        if folder.exists() and not folder.is_dir():
-            raise UserError(f"{folder} exists and is not a directory", where="--sine-tests")
         folder.mkdir(parents=True, exist_ok=True)
         t0 = start
         for k, period in enumerate(TSO_PERIODS_S, start=1):
             print(f"sine test {k}/{len(TSO_PERIODS_S)}: period {period:g} s ...", file=sys.stderr, flush=True)
-            res = sine_test(plant, period, amplitude_hz=0.1, config=config(60.0, False))
+            # The same process noise as in operation (sized from the closed loop at --snr-db): a plant
+            # does not get quieter during a test. The simulator picks the duration (settling + periods).
+            res = sine_test(
+                plant, period, amplitude_hz=0.1, config=SimConfig(snr_db=args.snr_db, seed=args.seed)
+            )
             log = log_from_sine(res, start=t0, sample_s=sample_s)
             end = t0 + timedelta(seconds=log.duration_s + sample_s)
             name = tso_filename(RESOURCE, SERVICE, sine_test_type(period), AREA, TIMEZONE, t0, end, sample_s)
-            path = write_log(folder / name, log)
+            path = _write(folder / name, log)
             print(_summary(path, log))
             t0 = _next_minute(end)  # tests run one after the other
     return 0
