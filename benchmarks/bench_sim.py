@@ -1,6 +1,6 @@
 """Simulator speed: 1800 s simulated at Tc = 0.02 s (90 000 samples), nonlinear and linear models.
 
-- batch: ``simulate_batch`` over 1000 realisations (in chunks of 250, keeping u and epsilon), time per run;
+- batch: ``simulate_batch`` over 1000 realisations (in chunks of 500, keeping u and epsilon), time per run;
 - single: ``simulate`` of one realisation (best of 3);
 - RealtimeSimulator: µs per step.
 
@@ -39,7 +39,7 @@ def _single(plant: Plant, cfg: SimConfig, repeat: int = 3) -> float:
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="bench_sim")
     ap.add_argument("--runs", type=int, default=1000)
-    ap.add_argument("--chunk", type=int, default=250)
+    ap.add_argument("--chunk", type=int, default=500)
     ap.add_argument("--duration", type=float, default=1800.0)
     args = ap.parse_args(argv)
     plant = Plant()
