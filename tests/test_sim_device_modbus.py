@@ -20,6 +20,7 @@ from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusIOException
 
 from fcrlive.plant.params import preset
+from fcrlive.sim.realtime import RealtimeSimulator
 from sim_device import SimGovernor, load_map
 from sim_device.device import (
     STATUS_EXCITATION_ACCEPTED,
@@ -37,45 +38,10 @@ IN_START, IN_COUNT = MAP.span("input")
 UNIT = MAP.unit_id
 
 
-class _StandIn:
-    """TEMPORARY stand-in until fcrlive.sim.realtime exists: no physics, counter-coded values."""
-
-    dt = 0.02
-
-    def __init__(self):
-        self.n = 0
-
-    def reset(self):
-        self.n = 0
-
-    def step(self, r=0.0):
-        from types import SimpleNamespace
-
-        self.n += 1
-        w = 1.0 + 1e-6 * (self.n % 100)
-        return SimpleNamespace(
-            n=self.n,
-            t=self.n * self.dt,
-            speed_pu=w,
-            grid_freq_hz=50 * w,
-            pe_mw=float(self.n % 300),
-            pm_mw=225.0,
-            c=0.85,
-            a=0.8,
-            r=r,
-            epsilon=r - (w - 1),
-            y=w - 1,
-        )
-
-
 def make_device(**kw) -> SimGovernor:
+    """An in-process device on a free loopback port, driven by the real plant simulator."""
     kw.setdefault("speed", 1.0)
-    try:
-        from fcrlive.sim.realtime import RealtimeSimulator
-
-        sim = RealtimeSimulator(PLANT, seed=kw.pop("seed", 3))
-    except ImportError:
-        sim = _StandIn()
+    sim = RealtimeSimulator(PLANT, seed=kw.pop("seed", 3))
     return SimGovernor(PLANT, simulator=sim, **kw)
 
 
@@ -139,7 +105,7 @@ async def test_snapshot_is_one_consistent_sample():
             v = await read_block(client)
             n = v["sample_counter"]
             assert v["device_time"] == n * dev.dt
-            s = samples[n - 1]  # the n-th sample since start (no restart here)
+            s = samples[n]  # sample n since start (no restart here)
             assert v["speed"] == f32(s.speed_pu)
             assert v["grid_freq"] == f32(s.grid_freq_hz)
             assert v["power"] == f32(s.pe_mw)
@@ -452,7 +418,7 @@ async def test_raw_socket_read_matches_documented_map():
         (speed,) = struct.unpack(">f", struct.pack(">2H", *regs[8:10]))
         (freq,) = struct.unpack(">f", struct.pack(">2H", *regs[10:12]))
         (power,) = struct.unpack(">f", struct.pack(">2H", *regs[12:14]))
-        assert counter >= 1 and t == counter * dev.dt
+        assert counter >= 0 and t == counter * dev.dt
         assert abs(speed - 1.0) < 0.01 and abs(freq - 50.0) < 0.5 and 0 < power < 300
         assert regs[6] & 0b11 == 0b11  # status: FCR-N active, normal operation
 
