@@ -11,6 +11,7 @@ import sys
 import pytest
 from test_sim_device_modbus import IN_COUNT, IN_START, UNIT, connect, read_block
 
+from sim_device.__main__ import main as cli_main
 from sim_device.registers import load_map
 
 ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
@@ -36,15 +37,21 @@ def run_cli(*args: str, timeout: float = 30) -> subprocess.CompletedProcess:
         (["--bogus"], "unrecognized arguments"),
     ],
 )
-def test_bad_flags_one_line_exit_2(args, fragment):
-    r = run_cli(*args)
-    assert r.returncode == 2, r
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1 and fragment in lines[0] and "Traceback" not in r.stderr, r.stderr
+def test_bad_flags_one_line_exit_2(args, fragment, capsys):
+    """In-process (no interpreter start per case): argparse and user errors end as one line, status 2."""
+    try:
+        status = cli_main(args)
+    except SystemExit as exc:  # argparse
+        status = exc.code
+    err = capsys.readouterr().err
+    assert status == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and fragment in lines[0] and "Traceback" not in err, err
     assert lines[0].startswith("fcrlive-sim-device: error:")
 
 
 def test_bad_plant_file_and_port_in_use(tmp_path):
+    """As a real process: exit status 2 and exactly one line on stderr."""
     r = run_cli("--plant", str(tmp_path / "missing.toml"))
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "missing.toml" in r.stderr
     with socket.socket() as s:
