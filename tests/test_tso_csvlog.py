@@ -304,3 +304,13 @@ def test_cli_bad_file_is_one_line_exit_2(tmp_path, monkeypatch, capsys):
     assert "Traceback" not in err
     good = _write_rows(tmp_path / "good.csv", HEADER, _good_rows())
     assert cli.main(["readlog", good]) == 0
+
+
+def test_from_arrays_splits_at_gaps_like_the_reader(tmp_path):
+    t = np.concatenate([np.arange(100) * 0.1, 12.0 + np.arange(100) * 0.1])
+    log = TsoLog.from_arrays(t, {"InsAcPow": np.ones(200), "GridFreq": np.full(200, 50.0)}, START)
+    assert log.segments == ((0, 100), (100, 200))
+    assert len(log.gaps) == 1 and log.gaps[0].missing == 20 and not log.gaps[0].filled
+    back = read_log(write_log(tmp_path / "g.csv", log))
+    assert back.segments == log.segments
+    assert back.gaps[0].length_s == pytest.approx(log.gaps[0].length_s)

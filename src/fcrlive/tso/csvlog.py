@@ -25,6 +25,7 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -181,21 +182,44 @@ class TsoLog:
         timezone: str = "UTC",
         units: Mapping[str, str] | None = None,
     ) -> TsoLog:
-        """A log from arrays (e.g. a simulation): one gap-free segment, no filled samples."""
+        """A log from arrays (e.g. a simulation or a store export), no filled samples.
+
+        Intervals longer than 1.5x the median are recorded as gaps (never filled) and split the log
+        into segments, as when reading a file.
+        """
         t = np.asarray(t_s, dtype=np.float64)
         if t.ndim != 1 or t.size < 2 or not np.all(np.diff(t) > 0):
             raise ValueError("t_s must be a 1-D strictly increasing array of at least 2 samples")
+        t = t - t[0]
         cols = {}
         for k, v in columns.items():
             a = np.asarray(v)
             cols[k] = a if a.dtype.kind in "US" else a.astype(np.float64)
+        dt = np.diff(t)
+        ts = float(np.median(dt))
+        breaks = np.flatnonzero(dt > 1.5 * ts)
+        gaps = tuple(
+            Gap(
+                row=0,
+                start=start + timedelta(seconds=float(t[i])),
+                t_s=float(t[i]),
+                length_s=float(dt[i]),
+                missing=round(dt[i] / ts) - 1,
+                filled=False,
+            )
+            for i in breaks
+        )
+        bounds = [0, *(int(i) + 1 for i in breaks), t.size]
         return cls(
-            t_s=t - t[0],
+            t_s=t,
             start=start,
             columns=cols,
             period_s=period_s,
             units=dict(units or {}),
             timezone=timezone,
+            sample_s=ts,
+            segments=tuple(pairwise(bounds)),
+            gaps=gaps,
         )
 
     def __len__(self) -> int:
@@ -627,7 +651,7 @@ def _regularise(t_us, columns, rows, *, where, max_fill, jitter, stamps):
     total = t_rel.shape[0]
     cuts = [int(new_index[i + 1]) for i in breaks]
     bounds = [0, *cuts, total]
-    segments = tuple((bounds[j], bounds[j + 1]) for j in range(len(bounds) - 1))
+    segments = tuple(pairwise(bounds))
     return t_rel, columns, filled, rows, segments, tuple(gaps), ts / 1e6
 
 
