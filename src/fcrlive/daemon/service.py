@@ -1,0 +1,251 @@
+"""The daemon: source → store → periodic identification in a worker → MQTT, with health reporting.
+
+``await Service(cfg).run(stop)`` runs until ``stop`` is set (SIGTERM/SIGINT in :func:`main`). The
+asyncio layer only moves data and schedules work:
+
+* sampler: every sample goes to the store writer queue, the metrics and the live statistics;
+* every ``stats_interval_s``: ``live`` statistics to MQTT, gauges refreshed;
+* every ``every_min``: the last ``window_min`` of samples is read back (in a thread), judged for
+  data quality, identified in the worker process, stored as JSON and published (retained);
+* systemd: READY=1 once running, WATCHDOG=1 only while samples keep flowing (a stuck sampler lets
+  systemd restart us), STOPPING=1 on the way out.
+
+Shutdown order: stop the sampler, flush and close the store (marks the run clean), publish
+"offline", close the links.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import signal
+import time
+from collections.abc import Callable
+from typing import Any
+
+from fcrlive.daemon.config import FcrliveConfig
+from fcrlive.daemon.health import Metrics, sd_notify, watchdog_interval_s
+from fcrlive.daemon.livestats import LiveStats
+from fcrlive.daemon.payloads import DataQuality, ResultPayload, Window, iso, result_topics
+from fcrlive.daemon.sample import Quality
+from fcrlive.daemon.store import ResultRow, SampleWriter, connect, read_window
+
+log = logging.getLogger("fcrlive.service")
+
+
+def make_source(cfg: FcrliveConfig):
+    """The configured source object (an async context manager with ``samples()`` and ``stats``)."""
+    if cfg.source.kind == "modbus":
+        from fcrlive.daemon.modbus_source import ModbusParams, ModbusSource
+
+        return ModbusSource(ModbusParams.from_config(cfg.source.modbus))
+    from fcrlive.daemon.can_source import CanParams, CanSource
+
+    return CanSource(CanParams.from_config(cfg.source.can))
+
+
+def poll_hz(cfg: FcrliveConfig) -> float:
+    """Configured sampling rate [Hz]."""
+    return cfg.source.modbus.poll_hz if cfg.source.kind == "modbus" else cfg.source.can.poll_hz
+
+
+def window_quality(w, expected: int) -> DataQuality:
+    """Data quality of a window read back from the store (pure)."""
+    gaps = w.gaps()
+    return DataQuality(
+        ok_fraction=min(1.0, w.ok_fraction(expected)), samples=len(w), expected=expected,
+        counts=w.quality_counts(), gaps=len(gaps), gap_s=float(sum(b - a for a, b in gaps)))
+
+
+class Service:
+    """One daemon instance. ``identify`` overrides ``[identification] function`` (a dotted path or a
+    picklable callable)."""
+
+    def __init__(self, cfg: FcrliveConfig, identify: str | Callable | None = None, version: str = ""):
+        self.cfg = cfg
+        self.identify = identify or cfg.identification.function
+        self.version = version
+        self.metrics = Metrics(cfg.unit.name)
+        self.signals = cfg.signals
+        self.last_sample_mono = 0.0
+        self.results = 0
+        self.source: Any = None
+        self.writer: SampleWriter | None = None
+        self.publisher: Any = None
+
+    # -- tasks ------------------------------------------------------------------------------------
+
+    async def _sampler(self, live: LiveStats) -> None:
+        async for s in self.source.samples():
+            self.writer.add(s)
+            self.metrics.observe_sample(s)
+            live.add(s)
+            if s.quality != Quality.MISSING:
+                self.last_sample_mono = time.monotonic()
+
+    async def _stats(self, live: LiveStats) -> None:
+        period = self.cfg.mqtt.stats_interval_s
+        prev = {"reconnects": 0, "watchdog": 0, "mqtt": 0}
+        while True:
+            await asyncio.sleep(period)
+            payload = live.snapshot(time.time())
+            if self.publisher is not None:
+                self.publisher.publish("live", payload)
+                self.metrics.mqtt_pending.set(self.publisher.pending)
+                st = self.publisher.stats
+                self.metrics.connected.labels("mqtt").set(1 if st.connected else 0)
+                self.metrics.reconnects.labels("mqtt").inc(max(0, st.connects - 1 - prev["mqtt"]))
+                prev["mqtt"] = max(prev["mqtt"], st.connects - 1)
+            ss = self.source.stats
+            self.metrics.connected.labels("source").set(1 if ss.connected else 0)
+            self.metrics.reconnects.labels("source").inc(ss.reconnects - prev["reconnects"])
+            self.metrics.watchdog_resets.inc(ss.watchdog_resets - prev["watchdog"])
+            prev["reconnects"], prev["watchdog"] = ss.reconnects, ss.watchdog_resets
+            self.metrics.store_committed.set(self.writer.committed)
+            log.info("stats samples=%d rate_hz=%.2f ok=%d comm_error=%d missed=%d committed=%d",
+                     payload.samples, payload.rate_hz, payload.quality["ok"], payload.quality["comm_error"],
+                     payload.missed_ticks, self.writer.committed)
+
+    async def _watchdog(self, interval: float) -> None:
+        while True:
+            await asyncio.sleep(interval)
+            # pet only while samples flow: a hung sampler must end in a restart
+            if time.monotonic() - self.last_sample_mono < max(10.0, 4 * interval):
+                sd_notify("WATCHDOG=1")
+
+    async def identify_once(self, worker) -> ResultPayload:
+        """Identify the last ``window_min`` of data now; store and publish the outcome."""
+        ic = self.cfg.identification
+        t2 = time.time()
+        t1 = t2 - ic.window_min * 60.0
+        w = await asyncio.to_thread(self._read, t1, t2)
+        expected = round((t2 - t1) * poll_hz(self.cfg))
+        quality = window_quality(w, expected)
+        result, error, dt = None, None, 0.0
+        if quality.ok_fraction < ic.min_ok_fraction:
+            error = f"too little good data: {quality.ok_fraction:.0%} ok < {ic.min_ok_fraction:.0%}"
+            self.metrics.ident_runs.labels("skipped").inc()
+        else:
+            from fcrlive.daemon.worker import window_signals
+
+            plant = str(self.cfg.unit.plant) if self.cfg.unit.plant else None
+            t0 = time.monotonic()
+            try:
+                result, _ = await worker.run(window_signals(w), self.cfg.unit.rated_mw, self.cfg.unit.f0,
+                                             plant=plant, method=ic.method)
+                self.metrics.ident_runs.labels("ok").inc()
+            except Exception as exc:  # the plug-in's failure is data for the user, not a daemon crash
+                error = f"{type(exc).__name__}: {exc}"
+                self.metrics.ident_runs.labels("error").inc()
+                log.warning("identification failed error=%r", error)
+            dt = time.monotonic() - t0
+            self.metrics.ident_duration.observe(dt)
+        t = time.time()
+        payload = ResultPayload(unit=self.cfg.unit.name, t=t, t_iso=iso(t), window=Window.of(t1, t2),
+                                method=ic.method, ok=error is None, error=error, duration_s=dt,
+                                quality=quality, result=result)
+        self.writer.add_result(ResultRow(t=t, t1=t1, t2=t2, method=ic.method,
+                                         ok_fraction=quality.ok_fraction, quality=quality.model_dump(),
+                                         result=result, duration_s=dt, error=error))
+        if result is not None:
+            self.metrics.result_published(t)
+            self.results += 1
+        if self.publisher is not None:
+            for topic, p in (result_topics(payload) if error is None else
+                             {"result/latest": payload, "quality": quality}).items():
+                self.publisher.publish(topic, p)
+        log.info("identification ok=%s ok_fraction=%.3f duration_s=%.2f error=%r", error is None,
+                 quality.ok_fraction, dt, error)
+        return payload
+
+    def _read(self, t1: float, t2: float):
+        con = connect(self.cfg.store.path, readonly=True)
+        try:
+            return read_window(con, t1, t2, self.signals)
+        finally:
+            con.close()
+
+    async def _identifier(self, worker) -> None:
+        period = self.cfg.identification.every_min * 60.0
+        loop = asyncio.get_running_loop()
+        next_t = loop.time() + period
+        while True:
+            await asyncio.sleep(max(0.0, next_t - loop.time()))
+            next_t += period
+            if next_t < loop.time():  # an identification overran: skip, do not queue up
+                next_t = loop.time() + period
+            try:
+                await self.identify_once(worker)
+            except Exception:
+                log.exception("identification round failed")
+
+    # -- lifecycle --------------------------------------------------------------------------------
+
+    async def run(self, stop: asyncio.Event) -> None:
+        """Run until ``stop`` is set."""
+        cfg = self.cfg
+        if cfg.metrics.enabled:
+            self.metrics.serve(cfg.metrics.host, cfg.metrics.port)
+        self.writer = SampleWriter(cfg.store.path, self.signals, cfg.store.commit_interval_s,
+                                   cfg.store.retention_hours, version=self.version,
+                                   info={"unit": cfg.unit.name, "source": cfg.source.kind,
+                                         "poll_hz": poll_hz(cfg), "signals": list(self.signals)})
+        await asyncio.to_thread(self.writer.open)
+        live = LiveStats(time.time(), self.signals)
+        async with contextlib.AsyncExitStack() as stack:
+            if cfg.mqtt.enabled:
+                from fcrlive.daemon.mqtt import MqttPublisher
+
+                live_signals = tuple(s for s in ("power", "grid_freq") if s in self.signals)
+                self.publisher = await stack.enter_async_context(
+                    MqttPublisher(cfg.mqtt, cfg.unit.name, live_signals=live_signals))
+            self.source = await stack.enter_async_context(make_source(cfg))
+            tasks = [asyncio.create_task(self._sampler(live), name="sampler"),
+                     asyncio.create_task(self._stats(live), name="stats")]
+            if (interval := watchdog_interval_s()) is not None:
+                tasks.append(asyncio.create_task(self._watchdog(interval), name="sd-watchdog"))
+            if cfg.identification.enabled:
+                from fcrlive.daemon.worker import IdentificationWorker
+
+                worker = await stack.enter_async_context(
+                    IdentificationWorker(self.identify, cfg.identification.timeout_s))
+                tasks.append(asyncio.create_task(self._identifier(worker), name="identifier"))
+            sd_notify("READY=1")
+            log.info("running unit=%s source=%s signals=%d store=%s", cfg.unit.name, cfg.source.kind,
+                     len(self.signals), cfg.store.path)
+            stopper = asyncio.create_task(stop.wait())
+            done, _ = await asyncio.wait([stopper, *tasks], return_when=asyncio.FIRST_COMPLETED)
+            sd_notify("STOPPING=1")
+            for t in [stopper, *tasks]:
+                t.cancel()
+            await asyncio.gather(stopper, *tasks, return_exceptions=True)
+            await asyncio.to_thread(self.writer.close)
+            failed = [t for t in done if t is not stopper and not t.cancelled() and t.exception()]
+            for t in failed:
+                log.error("task %s failed: %r", t.get_name(), t.exception(), exc_info=t.exception())
+            log.info("stopped committed=%d", self.writer.committed)
+            # leaving the stack: worker, source, then the publisher says "offline"
+        if failed:
+            raise failed[0].exception()
+
+
+async def run_service(cfg: FcrliveConfig, identify: str | Callable | None = None, version: str = "") -> None:
+    """Run until SIGTERM/SIGINT."""
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(sig, stop.set)
+    await Service(cfg, identify, version).run(stop)
+
+
+def main(config_path: str, log_level: str = "INFO") -> int:
+    """Entry point for ``fcrlive run --config FILE`` (wired by the CLI command)."""
+    from fcrlive import __version__
+    from fcrlive.daemon.config import load_config
+    from fcrlive.daemon.health import setup_logging
+
+    cfg = load_config(config_path)
+    setup_logging(log_level)
+    asyncio.run(run_service(cfg, version=__version__))
+    return 0
