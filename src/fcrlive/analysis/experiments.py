@@ -1,0 +1,460 @@
+"""The paper's identification experiments as pure functions (Sections 4.1-4.2, eqs. 7-8, 14-19).
+
+Every experiment takes :class:`fcrlive.tso.signals.PlantSignals` (pu on the machine base) and returns a
+frozen :class:`ExperimentResult`: the fitted models, a ``responses(omega)`` function giving uncertain
+frequency responses (:class:`fcrlive.ident.FreqResp`, first-order Gauss covariance) of ``G_1``, ``S``,
+``G_p``, ``G_J`` where identifiable, validation figures and warnings.
+
+Data handling (:func:`prepare`)
+-------------------------------
+The logs come at the controller rate (50 Hz) or a logger rate (10 Hz). The band that matters is
+10-300 s periods (peaks of S and G_1 near 0.15-0.3 rad/s), far below the logging Nyquist, while the
+slow swing pole (2H/Kd ≈ 70 s) puts discrete poles within 3e-4 of z = 1 at 50 Hz, where polynomial
+models are ill conditioned. The data are therefore low-passed and decimated to ``ts_id`` (default 0.5 s).
+The anti-aliasing filter is CAUSAL (Chebyshev I, order 8, cutoff 0.8 of the new Nyquist, run forwards
+only, the same filter on every signal): the closed-loop consistency of the direct methods rests on the
+delay from the process noise in y to the controller output (paper Condition C1); a zero-phase filter
+smears future noise into past inputs and biased S by 5-10 % in trials on paper-plant1, the causal filter
+keeps the ordering. Gaps (``PlantSignals.segments``) split the data into experiments; every segment is
+filtered from rest and its first ``skip_s`` seconds (filter transient) dropped; means are removed per
+experiment.
+
+Methods
+-------
+- ``zcu`` (Section 4.2.2): MISO output-error model y ← (c, u): y = G_jp c − G_J u + v (nk_c = 1 for the
+  ZOH, nk_u = 0); SISO a ← c gives G_s; the controller comes from the plant description or is
+  identified from ε, a, c (:func:`identify_controller`). G_p by the generalised eq. 19,
+  G_p = G_jp G_c / (G_J (1 + L_d)); S = 1/(1 + G_p G_J), G_1 = G_J S (eqs. 7-8). The output-error noise
+  model is the right one here: the process noise enters y white (paper Section 7.1).
+- ``zur`` (Section 4.2.1): the MISO relation ε = G_1 u + S r (eq. 14) with its process noise S·v is
+  estimated in the equivalent output-error form y = r − ε = (G_J G_p) ε − G_J u + v, whose noise is
+  white (ε holds r and, one controller sample later through the plant, the noise). S = 1/(1 + G_J G_p),
+  G_1 = G_J S and G_p (eq. 15 is the identity (1 − S)/G_1 = G_p) follow from the same fit, so the
+  algebra keeps their correlation. A direct high-order ARX ε ← (u, r) (the paper's choice) is also
+  fitted as a cross-check and its G_1(1) reported (``models["arx"]``); with 12 dB process noise its
+  peaks were far off in trials (its noise model 1/A cannot describe S·v), so it is not used for S.
+- ``zu`` (Sections 4.2.1 eq. 16, 6.3): no excitation. The same output-error form with r = 0 gives
+  G_1 = G_J/(1 + G_J G_p) (consistent under the same delay argument); S and G_p are NOT reported
+  (paper Section 6.3: without r they are not identifiable from the closed-loop data in general).
+- ``sine`` (Section 4.1): per period least-squares sine fits (:mod:`fcrlive.analysis.sine_fit`), giving
+  F(jω), G_req (eq. 11-13) and the Req. 10 linearity figure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.signal as sps
+
+from fcrlive.errors import DataError
+from fcrlive.ident import FreqResp, IdData, IdentError, ResidResult, arx, oe, resid
+from fcrlive.ident.poly import PolyModel
+from fcrlive.tso.signals import PlantSignals
+
+DEFAULT_TS_ID = 0.5
+"""Identification sample time [s] after decimation (module docstring)."""
+MIN_DURATION_S = 300.0
+"""Shortest usable (gap-free, after the filter transient) data [s] for the closed-loop methods."""
+
+Responses = Callable[[np.ndarray], dict[str, FreqResp]]
+
+
+# ---------------------------------------------------------------------------------------------------
+# Data preparation
+
+
+@dataclass(frozen=True, eq=False)
+class Prepared:
+    """Decimated, mean-free signals of all gap-free segments, concatenated (``starts`` per segment)."""
+
+    Ts: float
+    q: int
+    """Decimation factor from the log rate."""
+    signals: dict[str, np.ndarray]
+    starts: tuple[int, ...]
+    duration_s: float
+    """Usable duration after decimation [s]."""
+
+    def iddata(self, output: str, inputs: Sequence[str]) -> IdData:
+        return IdData(
+            self.signals[output], np.column_stack([self.signals[k] for k in inputs]), Ts=self.Ts,
+            output_name=output, input_names=tuple(inputs), starts=self.starts,
+        ).detrend("mean")
+
+
+def _decimator(q: int) -> tuple[np.ndarray, np.ndarray]:
+    return sps.cheby1(8, 0.05, 0.8 / q)
+
+
+def prepare(signals: PlantSignals, *, ts_id: float = DEFAULT_TS_ID, skip_s: float | None = None,
+            names: Sequence[str] = ("y", "u", "r", "epsilon", "c", "a")) -> Prepared:
+    """Causal anti-aliasing, decimation to ``ts_id`` and per-segment splitting (module docstring).
+
+    Signals that are None in ``signals`` are left out. Raises DataError when nothing long enough remains.
+    """
+    Ts = float(signals.Ts)
+    q = max(1, int(round(ts_id / Ts)))
+    ts_new = Ts * q
+    if skip_s is None:
+        skip_s = 10.0 * ts_new if q > 1 else 0.0
+    skip = int(round(skip_s / ts_new))
+    ba = _decimator(q) if q > 1 else None
+    avail = [k for k in names if getattr(signals, k, None) is not None]
+    out: dict[str, list[np.ndarray]] = {k: [] for k in avail}
+    starts, n = [], 0
+    for a, b in signals.segments:
+        if (b - a) // q - skip < 20:
+            continue
+        for k in avail:
+            x = np.asarray(getattr(signals, k), float)[a:b]
+            x = x - x.mean()
+            xf = sps.lfilter(ba[0], ba[1], x)[::q] if ba is not None else x
+            out[k].append(xf[skip:])
+        starts.append(n)
+        n += len(out[avail[0]][-1])
+    if not starts:
+        raise DataError(
+            f"no gap-free stretch longer than {(20 + skip) * ts_new:.0f} s to identify from",
+            where=", ".join(signals.sources) or None,
+        )
+    sig = {k: np.concatenate(v) for k, v in out.items()}
+    return Prepared(ts_new, q, sig, tuple(starts), n * ts_new)
+
+
+# ---------------------------------------------------------------------------------------------------
+# The controller
+
+
+@dataclass(frozen=True)
+class ControllerEstimate:
+    """The digital PI with permanent droop (fcrlive.plant.transfer docs), known or identified.
+
+    c[n] = Kp e[n] + I[n], I[n+1] = I[n] + Ts (Kp/Ti)(e[n] − ρ x[n]) (integral placement) or with
+    Kp (e − ρ x) in the proportional path too (classic); x = a (gate) or c (demand).
+    """
+
+    Kp: float
+    Ti: float
+    droop: float
+    placement: str
+    """"integral" or "classic"."""
+    signal: str
+    """"gate" or "demand"."""
+    source: str
+    """"plant description" or "identified"."""
+    rel_residual: float = 0.0
+    """RMS of the least-squares residual of Δc over the RMS of Δc (identified only)."""
+    alternatives: dict = field(default_factory=dict)
+    """Relative residual of every structure tried (identified only)."""
+
+    def G_c(self, omega: np.ndarray) -> np.ndarray:
+        s = 1j * np.asarray(omega, float)
+        return self.Kp * (1.0 + 1.0 / (self.Ti * s))
+
+    def K_rho(self, omega: np.ndarray) -> np.ndarray:
+        """The gain the droop signal goes through: K_I (integral) or G_c (classic)."""
+        s = 1j * np.asarray(omega, float)
+        return self.Kp / (self.Ti * s) if self.placement == "integral" else self.G_c(omega)
+
+
+def controller_from_plant(plant) -> ControllerEstimate:
+    gov = plant.unit.governor
+    return ControllerEstimate(gov.Kp, gov.Ti, gov.droop, gov.droop_placement, gov.droop_signal,
+                              "plant description")
+
+
+def identify_controller(signals: PlantSignals) -> ControllerEstimate:
+    """Kp, Ti and ρ from logged ε, c and a by least squares on the controller's difference equation.
+
+    With x the droop signal, one sample of the PI gives Δc[n] = c[n+1] − c[n] =
+    Kp Δe[n] + Ts Ki (e[n] − ρ x[n]) (− Kp ρ Δx[n] for the classic placement), Ki = Kp/Ti. All four
+    structures (integral/classic × gate/demand) are fitted with a constant; the smallest residual wins.
+    At a logging rate below the controller rate the relation is approximate (forward Euler per log
+    sample) and the residual says how well it holds. Raises DataError without c (and a for "gate").
+    """
+    if signals.c is None:
+        raise DataError("ContOutSig is needed to identify the controller")
+    best = None
+    alts: dict[str, float] = {}
+    Ts = signals.Ts
+    for a, b in [max(signals.segments, key=lambda s: s[1] - s[0])]:
+        e = np.asarray(signals.epsilon[a:b], float)
+        c = np.asarray(signals.c[a:b], float)
+        dc = np.diff(c)
+        de = np.diff(e)
+        for sig_name, x in (("gate", signals.a), ("demand", signals.c)):
+            if x is None:
+                continue
+            x = np.asarray(x[a:b], float)
+            dx = np.diff(x)
+            for placement in ("integral", "classic"):
+                # Δc = Kp Δe + k1 e − k2 x (− Kp ρ Δx) + const, k1 = Ts Ki, k2 = Ts Ki ρ
+                cols = [de, e[:-1], -x[:-1], np.ones_like(de)]
+                if placement == "classic":
+                    cols.append(-dx)
+                X = np.column_stack(cols)
+                th, *_ = np.linalg.lstsq(X, dc, rcond=None)
+                res = dc - X @ th
+                rel = float(np.sqrt(np.mean(res**2)) / max(np.sqrt(np.mean(dc**2)), 1e-300))
+                kp, k1, k2 = th[0], th[1], th[2]
+                if not (kp > 0 and k1 > 0 and k2 > 0):
+                    alts[f"{placement}/{sig_name}"] = float("inf")
+                    continue
+                ti = kp * Ts / k1
+                rho = k2 / k1
+                alts[f"{placement}/{sig_name}"] = rel
+                if best is None or rel < best[0] - 1e-6:
+                    best = (rel, kp, ti, rho, placement, sig_name)
+    if best is None:
+        raise DataError("could not identify a PI controller with droop from ContOutSig/GuideVane "
+                        "(no structure gave positive Kp, Ki and droop)")
+    rel, kp, ti, rho, placement, sig_name = best
+    return ControllerEstimate(float(kp), float(ti), float(rho), placement, sig_name, "identified",
+                              rel, alts)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Results
+
+
+@dataclass(frozen=True, eq=False)
+class ExperimentResult:
+    """One identification experiment: models, uncertain responses, validation, warnings."""
+
+    method: str
+    """"zcu", "zur", "zu"."""
+    Ts: float
+    """Identification sample time [s]."""
+    n_samples: int
+    duration_s: float
+    models: dict[str, PolyModel]
+    responses: Responses
+    """ω [rad/s] → {"G_1", "S", "G_p", "G_J"} (only what the method identifies)."""
+    identifiable: tuple[str, ...]
+    controller: ControllerEstimate | None = None
+    validation: dict[str, ResidResult] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+
+    @property
+    def omega_max(self) -> float:
+        """Nyquist frequency of the identification rate [rad/s]."""
+        return float(np.pi / self.Ts)
+
+
+def _validate(models: dict[str, tuple[PolyModel, IdData]]) -> tuple[dict[str, ResidResult], list[str]]:
+    val, warns = {}, []
+    for key, (m, d) in models.items():
+        try:
+            r = resid(m, d, max_lag=20)
+        except (IdentError, ValueError, np.linalg.LinAlgError):
+            continue
+        val[key] = r
+        if not r.passed:
+            what = []
+            if not r.white:
+                what.append(f"residuals not white (p = {r.whiteness_p:.2g})")
+            for name, ok, p in zip(d.input_names, r.independent, r.independence_p):
+                if not ok:
+                    what.append(f"residuals correlated with {name} (p = {p:.2g})")
+            warns.append(f"residual test of the {key} model failed: " + "; ".join(what))
+    return val, warns
+
+
+def _check_length(prep: Prepared, method: str) -> None:
+    if prep.duration_s < MIN_DURATION_S:
+        raise DataError(
+            f"{method}: {prep.duration_s:.0f} s of usable data, at least {MIN_DURATION_S:.0f} s are needed"
+        )
+
+
+def _fit(kind: str, fn, *args, **kw) -> PolyModel:
+    try:
+        return fn(*args, **kw)
+    except IdentError as exc:
+        raise DataError(f"identification of the {kind} model failed: {exc}") from None
+
+
+def _loop_output_error(prep: Prepared, x: str, nb: Sequence[int], nf: Sequence[int]) -> tuple[PolyModel, IdData]:
+    d = prep.iddata("y", (x, "u"))
+    m = _fit(f"y ← ({x}, u)", oe, d, list(nb), list(nf), [1, 0])
+    return m, d
+
+
+# ---------------------------------------------------------------------------------------------------
+# The experiments
+
+
+def zcu(signals: PlantSignals, *, controller: ControllerEstimate | None = None,
+        ts_id: float = DEFAULT_TS_ID, prep: Prepared | None = None,
+        orders: tuple[Sequence[int], Sequence[int]] = ((2, 1), (2, 1))) -> ExperimentResult:
+    """Z_cu with Z_ca (Section 4.2.2, eq. 17-19; module docstring). Needs c and a."""
+    if signals.c is None or signals.a is None:
+        raise DataError("zcu needs ContOutSig and GuideVane (controller output and gate position)")
+    prep = prep or prepare(signals, ts_id=ts_id)
+    _check_length(prep, "zcu")
+    notes = []
+    if controller is None:
+        controller = identify_controller(signals)
+        notes.append(
+            f"controller identified ({controller.placement} droop from the {controller.signal}): "
+            f"Kp = {controller.Kp:.4g}, Ti = {controller.Ti:.4g} s, droop = {controller.droop:.4g} "
+            f"(relative residual {controller.rel_residual:.2g})"
+        )
+    m_cu, d_cu = _loop_output_error(prep, "c", orders[0], orders[1])
+    d_ca = prep.iddata("a", ("c",))
+    m_ca = _fit("a ← c", oe, d_ca, 2, 1, 0)
+    ctl = controller
+
+    def responses(omega) -> dict[str, FreqResp]:
+        w = np.atleast_1d(np.asarray(omega, float))
+        G_jp = m_cu.freqresp(w, "c")
+        G_J = -m_cu.freqresp(w, "u")
+        G_s = m_ca.freqresp(w, 0)
+        x = G_s if ctl.signal == "gate" else 1.0
+        # c/ε = G_c/(1 + ρ K_ρ G_x), the integrator of G_c and K_ρ cancelling
+        L_d = ctl.droop * FreqResp.known(w, ctl.K_rho(w)) * x
+        C = FreqResp.known(w, ctl.G_c(w)) / (1.0 + L_d)
+        G_p = G_jp * C / G_J
+        S = 1.0 / (1.0 + G_p * G_J)
+        return {"G_1": G_J * S, "S": S, "G_p": G_p, "G_J": G_J, "G_jp": G_jp, "G_s": G_s}
+
+    val, warns = _validate({"y ← (c, u)": (m_cu, d_cu), "a ← c": (m_ca, d_ca)})
+    return ExperimentResult(
+        "zcu", prep.Ts, d_cu.N, prep.duration_s, {"y<-(c,u)": m_cu, "a<-c": m_ca}, responses,
+        ("G_1", "S", "G_p"), ctl, val, tuple(warns), tuple(notes),
+    )
+
+
+def _eps_form(signals: PlantSignals, method: str, ts_id: float, prep: Prepared | None,
+              orders) -> tuple[Prepared, PolyModel, IdData]:
+    prep = prep or prepare(signals, ts_id=ts_id, names=("y", "u", "r", "epsilon"))
+    _check_length(prep, method)
+    m, d = _loop_output_error(prep, "epsilon", orders[0], orders[1])
+    return prep, m, d
+
+
+def _eps_responses(m: PolyModel) -> Responses:
+    def responses(omega) -> dict[str, FreqResp]:
+        w = np.atleast_1d(np.asarray(omega, float))
+        G_a = m.freqresp(w, "epsilon")  # G_J G_p
+        G_J = -m.freqresp(w, "u")
+        S = 1.0 / (1.0 + G_a)
+        return {"G_1": G_J * S, "S": S, "G_p": G_a / G_J, "G_J": G_J}
+
+    return responses
+
+
+def zur(signals: PlantSignals, *, ts_id: float = DEFAULT_TS_ID, prep: Prepared | None = None,
+        orders=((3, 1), (3, 1))) -> ExperimentResult:
+    """Z_ur (Section 4.2.1, eq. 14-15) in the equivalent output-error form (module docstring)."""
+    if not signals.has_excitation:
+        raise DataError("zur needs an excitation (ApplFreqSig differing from GridFreq)")
+    prep, m, d = _eps_form(signals, "zur", ts_id, prep, orders)
+    models = {"y<-(epsilon,u)": m}
+    notes = []
+    try:
+        da = prep.iddata("epsilon", ("u", "r"))
+        ma = arx(da, 20, [20, 20], [0, 0])
+        g0, sd = ma.static_gain("u")
+        models["arx"] = ma
+        notes.append(f"cross-check, high-order ARX ε ← (u, r) (paper): G_1(1) = {g0:.4g} ± {1.96 * sd:.2g}")
+    except IdentError:
+        pass
+    val, warns = _validate({"y ← (ε, u)": (m, d)})
+    return ExperimentResult("zur", prep.Ts, d.N, prep.duration_s, models, _eps_responses(m),
+                            ("G_1", "S", "G_p"), None, val, tuple(warns), tuple(notes))
+
+
+def zu(signals: PlantSignals, *, ts_id: float = DEFAULT_TS_ID, prep: Prepared | None = None,
+       orders=((3, 1), (3, 1))) -> ExperimentResult:
+    """Z_u (eq. 16, Section 6.3): G_1 only, from power and frequency (module docstring)."""
+    prep, m, d = _eps_form(signals, "zu", ts_id, prep, orders)
+    full = _eps_responses(m)
+
+    def responses(omega) -> dict[str, FreqResp]:
+        return {"G_1": full(omega)["G_1"]}
+
+    val, warns = _validate({"y ← (ε, u)": (m, d)})
+    warns.append("no excitation: S and G_p cannot be identified from this log (paper Section 6.3)")
+    return ExperimentResult("zu", prep.Ts, d.N, prep.duration_s, {"y<-(epsilon,u)": m}, responses,
+                            ("G_1",), None, val, tuple(warns))
+
+
+# ---------------------------------------------------------------------------------------------------
+# The industry sine test
+
+
+@dataclass(frozen=True, eq=False)
+class SineExperiment:
+    """The industry sine test over several periods (Section 4.1)."""
+
+    results: tuple  # of sine_fit.SineTestResult, sorted by period
+    droop: float
+    """ρ used to normalise F (from the plant description or estimated)."""
+    droop_source: str
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def omega(self) -> np.ndarray:
+        return np.array([r.omega for r in self.results])
+
+    @property
+    def G_req(self) -> np.ndarray:
+        return np.array([r.G_req for r in self.results], complex)
+
+    @property
+    def G_req_sd(self) -> np.ndarray:
+        """Circular sd of G_req [pu], from the F sd scaled by |G_req|/|F|."""
+        return np.array([r.F_sd * abs(r.G_req) / abs(r.F) if abs(r.F) > 0 else np.nan for r in self.results])
+
+    @property
+    def F(self) -> np.ndarray:
+        return np.array([r.F for r in self.results], complex)
+
+    @property
+    def F_sd(self) -> np.ndarray:
+        return np.array([r.F_sd for r in self.results])
+
+
+def sine(signals: Sequence[PlantSignals], *, droop: float | None = None, t_fme_s: float | None = None
+         ) -> SineExperiment:
+    """Evaluate sine-test logs (one per period, ``period_s`` set) with analysis.sine_fit.
+
+    ``droop`` ρ normalises F = ρ·G_req; without it ρ is estimated as 1/Re G_req at the longest period
+    (a warning says so). F and G_req are what the test measures: G_p seen through the grid's low-pass
+    (paper eq. 12-13).
+    """
+    from fcrlive.analysis.sine_fit import evaluate_sine_test
+
+    sigs = sorted(signals, key=lambda s: s.period_s or 0.0)
+    if not sigs or any(s.period_s is None for s in sigs):
+        raise DataError("sine-test evaluation needs sine-test logs (period in the headers)")
+    warns = []
+    src = "plant description"
+    if droop is None:
+        longest = sigs[-1]
+        r0 = _one_sine(longest, 1.0, t_fme_s, evaluate_sine_test)
+        droop = 1.0 / max(r0.G_req.real, 1e-12)
+        src = f"estimated from the {longest.period_s:g} s test"
+        warns.append(f"no plant description: droop {droop:.4g} estimated as 1/Re G_req at the longest "
+                     f"period ({longest.period_s:g} s) to normalise F")
+    results = tuple(_one_sine(s, droop, t_fme_s, evaluate_sine_test) for s in sigs)
+    for r in results:
+        if not r.linearity_passed:
+            warns.append(f"Req. 10 (linearity) failed at T = {r.period_s:g} s: {r.linearity:.2f} ≥ 1")
+    return SineExperiment(results, float(droop), src, tuple(warns))
+
+
+def _one_sine(s: PlantSignals, droop: float, t_fme_s, evaluate):
+    a, b = max(s.segments, key=lambda g: g[1] - g[0])
+    t = s.t[a:b]
+    err_hz = np.asarray(s.epsilon[a:b]) * s.f0
+    p_mw = np.asarray(s.u[a:b]) * s.rated_mw + s.p0_mw
+    try:
+        return evaluate(t, err_hz, p_mw, float(s.period_s), rated_mw=s.rated_mw, droop=droop, f0_hz=s.f0,
+                        t_fme_s=t_fme_s, is_control_error=True)
+    except DataError as exc:
+        raise DataError(exc.message, where=", ".join(s.sources) or None) from None
