@@ -154,3 +154,10 @@ def test_check_config_cli(tmp_path):
     good = _cli("check-config", str(ROOT / "deploy" / "fcrlive.toml"))
     assert good.returncode == 0, good.stderr
     assert "source modbus" in good.stdout and "grid_freq" in good.stdout
+
+
+def test_config_docs_are_generated_from_the_models():
+    from fcrlive.daemon.config import render_config_docs
+
+    assert (ROOT / "docs" / "config.md").read_text(encoding="utf-8") == render_config_docs(), \
+        "run: python -m fcrlive.daemon.config docs/config.md"
