@@ -79,8 +79,12 @@ class Prepared:
 
     def iddata(self, output: str, inputs: Sequence[str]) -> IdData:
         return IdData(
-            self.signals[output], np.column_stack([self.signals[k] for k in inputs]), Ts=self.Ts,
-            output_name=output, input_names=tuple(inputs), starts=self.starts,
+            self.signals[output],
+            np.column_stack([self.signals[k] for k in inputs]),
+            Ts=self.Ts,
+            output_name=output,
+            input_names=tuple(inputs),
+            starts=self.starts,
         ).detrend("mean")
 
 
@@ -88,18 +92,23 @@ def _decimator(q: int) -> tuple[np.ndarray, np.ndarray]:
     return sps.cheby1(8, 0.05, 0.8 / q)
 
 
-def prepare(signals: PlantSignals, *, ts_id: float = DEFAULT_TS_ID, skip_s: float | None = None,
-            names: Sequence[str] = ("y", "u", "r", "epsilon", "c", "a")) -> Prepared:
+def prepare(
+    signals: PlantSignals,
+    *,
+    ts_id: float = DEFAULT_TS_ID,
+    skip_s: float | None = None,
+    names: Sequence[str] = ("y", "u", "r", "epsilon", "c", "a"),
+) -> Prepared:
     """Causal anti-aliasing, decimation to ``ts_id`` and per-segment splitting (module docstring).
 
     Signals that are None in ``signals`` are left out. Raises DataError when nothing long enough remains.
     """
     Ts = float(signals.Ts)
-    q = max(1, int(round(ts_id / Ts)))
+    q = max(1, round(ts_id / Ts))
     ts_new = Ts * q
     if skip_s is None:
         skip_s = 10.0 * ts_new if q > 1 else 0.0
-    skip = int(round(skip_s / ts_new))
+    skip = round(skip_s / ts_new)
     ba = _decimator(q) if q > 1 else None
     avail = [k for k in names if getattr(signals, k, None) is not None]
     out: dict[str, list[np.ndarray]] = {k: [] for k in avail}
@@ -161,8 +170,9 @@ class ControllerEstimate:
 
 def controller_from_plant(plant) -> ControllerEstimate:
     gov = plant.unit.governor
-    return ControllerEstimate(gov.Kp, gov.Ti, gov.droop, gov.droop_placement, gov.droop_signal,
-                              "plant description")
+    return ControllerEstimate(
+        gov.Kp, gov.Ti, gov.droop, gov.droop_placement, gov.droop_signal, "plant description"
+    )
 
 
 def identify_controller(signals: PlantSignals) -> ControllerEstimate:
@@ -208,11 +218,12 @@ def identify_controller(signals: PlantSignals) -> ControllerEstimate:
                 if best is None or rel < best[0] - 1e-6:
                     best = (rel, kp, ti, rho, placement, sig_name)
     if best is None:
-        raise DataError("could not identify a PI controller with droop from ContOutSig/GuideVane "
-                        "(no structure gave positive Kp, Ki and droop)")
+        raise DataError(
+            "could not identify a PI controller with droop from ContOutSig/GuideVane "
+            "(no structure gave positive Kp, Ki and droop)"
+        )
     rel, kp, ti, rho, placement, sig_name = best
-    return ControllerEstimate(float(kp), float(ti), float(rho), placement, sig_name, "identified",
-                              rel, alts)
+    return ControllerEstimate(float(kp), float(ti), float(rho), placement, sig_name, "identified", rel, alts)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -277,7 +288,9 @@ def _fit(kind: str, fn, *args, **kw) -> PolyModel:
         raise DataError(f"identification of the {kind} model failed: {exc}") from None
 
 
-def _loop_output_error(prep: Prepared, x: str, nb: Sequence[int], nf: Sequence[int]) -> tuple[PolyModel, IdData]:
+def _loop_output_error(
+    prep: Prepared, x: str, nb: Sequence[int], nf: Sequence[int]
+) -> tuple[PolyModel, IdData]:
     d = prep.iddata("y", (x, "u"))
     m = _fit(f"y ← ({x}, u)", oe, d, list(nb), list(nf), [1, 0])
     return m, d
@@ -287,9 +300,14 @@ def _loop_output_error(prep: Prepared, x: str, nb: Sequence[int], nf: Sequence[i
 # The experiments
 
 
-def zcu(signals: PlantSignals, *, controller: ControllerEstimate | None = None,
-        ts_id: float = DEFAULT_TS_ID, prep: Prepared | None = None,
-        orders: tuple[Sequence[int], Sequence[int]] = ((2, 1), (2, 1))) -> ExperimentResult:
+def zcu(
+    signals: PlantSignals,
+    *,
+    controller: ControllerEstimate | None = None,
+    ts_id: float = DEFAULT_TS_ID,
+    prep: Prepared | None = None,
+    orders: tuple[Sequence[int], Sequence[int]] = ((2, 1), (2, 1)),
+) -> ExperimentResult:
     """Z_cu with Z_ca (Section 4.2.2, eq. 17-19; module docstring). Needs c and a."""
     if signals.c is None or signals.a is None:
         raise DataError("zcu needs ContOutSig and GuideVane (controller output and gate position)")
@@ -323,13 +341,23 @@ def zcu(signals: PlantSignals, *, controller: ControllerEstimate | None = None,
 
     val, warns = _validate({"y ← (c, u)": (m_cu, d_cu), "a ← c": (m_ca, d_ca)})
     return ExperimentResult(
-        "zcu", prep.Ts, d_cu.N, prep.duration_s, {"y<-(c,u)": m_cu, "a<-c": m_ca}, responses,
-        ("G_1", "S", "G_p"), ctl, val, tuple(warns), tuple(notes),
+        "zcu",
+        prep.Ts,
+        d_cu.N,
+        prep.duration_s,
+        {"y<-(c,u)": m_cu, "a<-c": m_ca},
+        responses,
+        ("G_1", "S", "G_p"),
+        ctl,
+        val,
+        tuple(warns),
+        tuple(notes),
     )
 
 
-def _eps_form(signals: PlantSignals, method: str, ts_id: float, prep: Prepared | None,
-              orders) -> tuple[Prepared, PolyModel, IdData]:
+def _eps_form(
+    signals: PlantSignals, method: str, ts_id: float, prep: Prepared | None, orders
+) -> tuple[Prepared, PolyModel, IdData]:
     prep = prep or prepare(signals, ts_id=ts_id, names=("y", "u", "r", "epsilon"))
     _check_length(prep, method)
     m, d = _loop_output_error(prep, "epsilon", orders[0], orders[1])
@@ -347,8 +375,13 @@ def _eps_responses(m: PolyModel) -> Responses:
     return responses
 
 
-def zur(signals: PlantSignals, *, ts_id: float = DEFAULT_TS_ID, prep: Prepared | None = None,
-        orders=((3, 1), (3, 1))) -> ExperimentResult:
+def zur(
+    signals: PlantSignals,
+    *,
+    ts_id: float = DEFAULT_TS_ID,
+    prep: Prepared | None = None,
+    orders=((3, 1), (3, 1)),
+) -> ExperimentResult:
     """Z_ur (Section 4.2.1, eq. 14-15) in the equivalent output-error form (module docstring)."""
     if not signals.has_excitation:
         raise DataError("zur needs an excitation (ApplFreqSig differing from GridFreq)")
@@ -364,12 +397,28 @@ def zur(signals: PlantSignals, *, ts_id: float = DEFAULT_TS_ID, prep: Prepared |
     except IdentError:
         pass
     val, warns = _validate({"y ← (ε, u)": (m, d)})
-    return ExperimentResult("zur", prep.Ts, d.N, prep.duration_s, models, _eps_responses(m),
-                            ("G_1", "S", "G_p"), None, val, tuple(warns), tuple(notes))
+    return ExperimentResult(
+        "zur",
+        prep.Ts,
+        d.N,
+        prep.duration_s,
+        models,
+        _eps_responses(m),
+        ("G_1", "S", "G_p"),
+        None,
+        val,
+        tuple(warns),
+        tuple(notes),
+    )
 
 
-def zu(signals: PlantSignals, *, ts_id: float = DEFAULT_TS_ID, prep: Prepared | None = None,
-       orders=((3, 1), (3, 1))) -> ExperimentResult:
+def zu(
+    signals: PlantSignals,
+    *,
+    ts_id: float = DEFAULT_TS_ID,
+    prep: Prepared | None = None,
+    orders=((3, 1), (3, 1)),
+) -> ExperimentResult:
     """Z_u (eq. 16, Section 6.3): G_1 only, from power and frequency (module docstring)."""
     prep, m, d = _eps_form(signals, "zu", ts_id, prep, orders)
     full = _eps_responses(m)
@@ -379,8 +428,18 @@ def zu(signals: PlantSignals, *, ts_id: float = DEFAULT_TS_ID, prep: Prepared | 
 
     val, warns = _validate({"y ← (ε, u)": (m, d)})
     warns.append("no excitation: S and G_p cannot be identified from this log (paper Section 6.3)")
-    return ExperimentResult("zu", prep.Ts, d.N, prep.duration_s, {"y<-(epsilon,u)": m}, responses,
-                            ("G_1",), None, val, tuple(warns))
+    return ExperimentResult(
+        "zu",
+        prep.Ts,
+        d.N,
+        prep.duration_s,
+        {"y<-(epsilon,u)": m},
+        responses,
+        ("G_1",),
+        None,
+        val,
+        tuple(warns),
+    )
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -419,8 +478,9 @@ class SineExperiment:
         return np.array([r.F_sd for r in self.results])
 
 
-def sine(signals: Sequence[PlantSignals], *, droop: float | None = None, t_fme_s: float | None = None
-         ) -> SineExperiment:
+def sine(
+    signals: Sequence[PlantSignals], *, droop: float | None = None, t_fme_s: float | None = None
+) -> SineExperiment:
     """Evaluate sine-test logs (one per period, ``period_s`` set) with analysis.sine_fit.
 
     ``droop`` ρ normalises F = ρ·G_req; without it ρ is estimated as 1/Re G_req at the longest period
@@ -439,8 +499,10 @@ def sine(signals: Sequence[PlantSignals], *, droop: float | None = None, t_fme_s
         r0 = _one_sine(longest, 1.0, t_fme_s, evaluate_sine_test)
         droop = 1.0 / max(r0.G_req.real, 1e-12)
         src = f"estimated from the {longest.period_s:g} s test"
-        warns.append(f"no plant description: droop {droop:.4g} estimated as 1/Re G_req at the longest "
-                     f"period ({longest.period_s:g} s) to normalise F")
+        warns.append(
+            f"no plant description: droop {droop:.4g} estimated as 1/Re G_req at the longest "
+            f"period ({longest.period_s:g} s) to normalise F"
+        )
     results = tuple(_one_sine(s, droop, t_fme_s, evaluate_sine_test) for s in sigs)
     for r in results:
         if not r.linearity_passed:
@@ -454,7 +516,16 @@ def _one_sine(s: PlantSignals, droop: float, t_fme_s, evaluate):
     err_hz = np.asarray(s.epsilon[a:b]) * s.f0
     p_mw = np.asarray(s.u[a:b]) * s.rated_mw + s.p0_mw
     try:
-        return evaluate(t, err_hz, p_mw, float(s.period_s), rated_mw=s.rated_mw, droop=droop, f0_hz=s.f0,
-                        t_fme_s=t_fme_s, is_control_error=True)
+        return evaluate(
+            t,
+            err_hz,
+            p_mw,
+            float(s.period_s),
+            rated_mw=s.rated_mw,
+            droop=droop,
+            f0_hz=s.f0,
+            t_fme_s=t_fme_s,
+            is_control_error=True,
+        )
     except DataError as exc:
         raise DataError(exc.message, where=", ".join(s.sources) or None) from None
