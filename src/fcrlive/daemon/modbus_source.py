@@ -138,7 +138,8 @@ class ModbusSource:
             self._client.close()
             self._client = None
             if self.stats.connected:
-                log.warning("modbus disconnected host=%s port=%d reason=%s", self.p.host, self.p.port, why)
+                log.log(logging.INFO if why == "closing" else logging.WARNING,
+                        "modbus disconnected host=%s port=%d reason=%s", self.p.host, self.p.port, why)
         self.stats.connected = False
         self._connected.clear()
 
