@@ -193,29 +193,31 @@ def identify_controller(signals: PlantSignals) -> ControllerEstimate:
         c = np.asarray(signals.c[a:b], float)
         dc = np.diff(c)
         de = np.diff(e)
-        for sig_name, x in (("gate", signals.a), ("demand", signals.c)):
-            if x is None:
-                continue
+        cands = [("gate", signals.a)] if signals.a is not None else [("demand", signals.c)]
+        for sig_name, x in cands:
             x = np.asarray(x[a:b], float)
             dx = np.diff(x)
             for placement in ("integral", "classic"):
-                # Δc = Kp Δe + k1 e − k2 x (− Kp ρ Δx) + const, k1 = Ts Ki, k2 = Ts Ki ρ
-                cols = [de, e[:-1], -x[:-1], np.ones_like(de)]
-                if placement == "classic":
-                    cols.append(-dx)
-                X = np.column_stack(cols)
-                th, *_ = np.linalg.lstsq(X, dc, rcond=None)
-                res = dc - X @ th
-                rel = float(np.sqrt(np.mean(res**2)) / max(np.sqrt(np.mean(dc**2)), 1e-300))
-                kp, k1, k2 = th[0], th[1], th[2]
-                if not (kp > 0 and k1 > 0 and k2 > 0):
-                    alts[f"{placement}/{sig_name}"] = float("inf")
-                    continue
-                ti = kp * Ts / k1
-                rho = k2 / k1
-                alts[f"{placement}/{sig_name}"] = rel
-                if best is None or rel < best[0] - 1e-6:
-                    best = (rel, kp, ti, rho, placement, sig_name)
+                for rule in ("euler", "trapezoid"):
+                    # Δc = Kp Δe + k1 e − k2 x (− Kp ρ Δx) + const, k1 = Ts Ki, k2 = Ts Ki ρ;
+                    # "trapezoid" takes the mean of both ends (a log rate below the controller rate)
+                    ee = e[:-1] if rule == "euler" else 0.5 * (e[:-1] + e[1:])
+                    xx = x[:-1] if rule == "euler" else 0.5 * (x[:-1] + x[1:])
+                    cols = [de, ee, -xx, np.ones_like(de)]
+                    if placement == "classic":
+                        cols.append(-dx)
+                    X = np.column_stack(cols)
+                    th, *_ = np.linalg.lstsq(X, dc, rcond=None)
+                    res = dc - X @ th
+                    rel = float(np.sqrt(np.mean(res**2)) / max(np.sqrt(np.mean(dc**2)), 1e-300))
+                    kp, k1, k2 = th[0], th[1], th[2]
+                    key = f"{placement}/{sig_name}/{rule}"
+                    if not (kp > 1e-6 and k1 > 0 and k2 > 0):
+                        alts[key] = float("inf")
+                        continue
+                    alts[key] = rel
+                    if best is None or rel < best[0] - 1e-6:
+                        best = (rel, kp, kp * Ts / k1, k2 / k1, placement, sig_name)
     if best is None:
         raise DataError(
             "could not identify a PI controller with droop from ContOutSig/GuideVane "
@@ -320,6 +322,13 @@ def zcu(
             f"Kp = {controller.Kp:.4g}, Ti = {controller.Ti:.4g} s, droop = {controller.droop:.4g} "
             f"(relative residual {controller.rel_residual:.2g})"
         )
+    ctl_warn = []
+    if controller.source == "identified" and controller.rel_residual > 0.05:
+        ctl_warn.append(
+            f"controller identification residual {controller.rel_residual:.2g}: the difference equation does "
+            "not hold at this log rate (below the controller rate?); Kp, Ti, droop and G_p may be biased: "
+            "give the plant description (--plant)"
+        )
     m_cu, d_cu = _loop_output_error(prep, "c", orders[0], orders[1])
     d_ca = prep.iddata("a", ("c",))
     m_ca = _fit("a ← c", oe, d_ca, 2, 1, 0)
@@ -339,6 +348,7 @@ def zcu(
         return {"G_1": G_J * S, "S": S, "G_p": G_p, "G_J": G_J, "G_jp": G_jp, "G_s": G_s}
 
     val, warns = _validate({"y ← (c, u)": (m_cu, d_cu), "a ← c": (m_ca, d_ca)})
+    warns = ctl_warn + warns
     return ExperimentResult(
         "zcu",
         prep.Ts,

@@ -245,6 +245,10 @@ def _ci(v: ValueCI | None, fmt: str = "{:.4f}", scale: float = 1.0, unit: str = 
     return s + (f" {unit}" if unit else "")
 
 
+def _num(x, fmt: str) -> str:
+    return "inf" if x is None else fmt.format(x)
+
+
 def text_summary(r: IdentifyReport) -> str:
     lines = [
         f"method: {r.method} ({r.method_reason})",
@@ -267,10 +271,11 @@ def text_summary(r: IdentifyReport) -> str:
             f"{'controller':<28}Kp = {c.kp:.4g}, Ti = {c.ti_s:.4g} s, droop {100 * c.droop:.3g} % "
             f"({c.placement}/{c.signal}, {c.source})"
         )
-    if r.local is not None and r.local.gain_margin is not None:
+    if r.local is not None and r.local.stability_margin is not None:
         lo = r.local
         lines.append(
-            f"{'local loop L = G_p G_J':<28}GM = {lo.gain_margin:.3g}, PM = {lo.phase_margin_deg:.3g}°, "
+            f"{'local loop L = G_p G_J':<28}GM = {_num(lo.gain_margin, '{:.3g}')}, "
+            f"PM = {_num(lo.phase_margin_deg, '{:.3g}')}°, "
             f"min|1+L| = {lo.stability_margin:.3f}"
             + (
                 f"; eq. 9 {'pass' if lo.sensitivity_pass else 'FAIL'} (M_s {lo.max_s_bound:g})"
@@ -296,6 +301,9 @@ def text_summary(r: IdentifyReport) -> str:
     if r.tso:
         lines += ["", "TSO requirements (Req. 8 stability, Req. 9 performance):"]
         for k, v in r.tso.items():
+            if v.stability_margin_band is None or v.performance_ratio is None:
+                lines.append(f"  {k.upper():<5} {'PASS' if v.passed else 'FAIL'}")
+                continue
             wide = "n/a" if v.stability_margin_wide is None else f"{v.stability_margin_wide:.3f}"
             stab = (
                 "n/a" if v.closed_loop_stable is None else ("stable" if v.closed_loop_stable else "UNSTABLE")
