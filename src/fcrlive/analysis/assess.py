@@ -199,6 +199,14 @@ def _assess_sine(result: SineExperiment, *, t_fme_s, products) -> Assessment:
         )
         for wi, v, s in zip(w, Greq, sd)
     )
+    warns.append(
+        "sine tests: G_req (G_p through the grid's low-pass, paper eq. 12-13) at the tested periods "
+        "only; no G_1, S, droop interval or closed-loop stability from them"
+    )
+    if not np.isfinite(result.droop):
+        return Assessment(
+            "sine", 0.0, None, None, None, None, "G_req", gp, None, None, None, None, None, tuple(warns)
+        )
     Fv = result.F
     if t_fme_s is not None:
         Fv = Fv * fme_response(t_fme_s)(w)
@@ -209,27 +217,7 @@ def _assess_sine(result: SineExperiment, *, t_fme_s, products) -> Assessment:
         for wi, v, s in zip(w, Fv, result.F_sd)
     )
     tso = assess_tso_points(w, Fv, F_sd_values=result.F_sd, products=products)
-    warns.append(
-        "sine tests: G_req (G_p through the grid's low-pass, paper eq. 12-13) at the tested periods "
-        "only; no G_1, S, droop interval or closed-loop stability from them"
-    )
     droop = Interval(result.droop, result.droop, result.droop)
     return Assessment(
-        "sine",
-        0.0,
-        None,
-        droop,
-        None,
-        None,
-        "G_req",
-        gp,
-        f,
-        tso,
-        None,
-        None,
-        None,
-        tuple(warns),
-        None,
-        None,
-        None,
+        "sine", 0.0, None, droop, None, None, "G_req", gp, f, tso, None, None, None, tuple(warns)
     )
