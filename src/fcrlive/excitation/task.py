@@ -6,10 +6,11 @@ deadlines, ``period_s`` apart; missed ticks are skipped and counted)
 1. read the device's grid frequency, status word, sample counter and applied excitation (one FC4);
 2. take the generator's next r[n] (the generator advances every tick, inhibited or not, so sample n of
    the stored description is the request of tick n);
-3. pass both through :meth:`SafetyGuard.step`: a failed read or write at this or the previous tick is
-   given to the guard as "status unknown", a hard interlock, so every link problem zeroes at once and
-   restarts the hold-off; an unchanged sample counter means the frequency is not new (a frozen device
-   becomes ``stale_measurement``);
+3. pass both through :meth:`SafetyGuard.step`: a failed read or write at this or the previous tick, or
+   a new connection (the writer's first write on it is a forced zero), is given to the guard as "status
+   unknown", a hard interlock, so every link problem zeroes at once and restarts the hold-off; an
+   unchanged sample counter means the frequency is not new (a frozen device becomes
+   ``stale_measurement``);
 4. write ``decision.value_hz`` (and only that) with :class:`ExcitationWriter` (zero first after every
    (re)connect, FC16, read-back, heartbeat);
 5. record a :class:`WrittenSample` (``on_written``) and, when the state changes (active / inhibited and
@@ -289,7 +290,11 @@ class ExcitationTask:
     async def _tick(self) -> None:
         m = await self.writer.read_measurements()
         now = self.clock()
-        link_ok = m is not None and self._link_ok_prev
+        # A failed read now or a failed write at the previous tick, or a link that is not armed (a new
+        # connection: this tick's write will be a forced zero) is "status unknown" for the guard: a hard
+        # interlock, so the guard's value is 0.0 like the device's and the hold-off starts again (no jump
+        # from the forced zero back to r, no rate-limit violation seen by the device).
+        link_ok = m is not None and self._link_ok_prev and self.writer.armed
         grid: float | None = None
         if m is not None and (m.counter is None or m.counter != self._last_counter):
             grid = m.grid_freq_hz
@@ -451,7 +456,9 @@ async def _amain(args) -> int:
         from sim_device.registers import DEFAULT_MAP_PATH
 
         args.register_map = DEFAULT_MAP_PATH
-    rmap = load_register_map(args.register_map)
+    from pathlib import Path
+
+    rmap = load_register_map(Path(args.register_map))
     limits = GuardLimits(amplitude_hz=args.amplitude_hz, rate_limit_hz_per_s=args.rate_limit,
                          holdoff_s=args.holdoff_s)
     gen = make_generator({"kind": args.kind, "seed": args.seed, "amplitude_hz": args.amplitude_hz,
