@@ -45,6 +45,8 @@ class _Struct:
     nd: int
     nf: tuple[int, ...]
     nk: tuple[int, ...]
+    ic: bool = False
+    """Estimate each experiment's initial state and output offset (variable projection)."""
 
     @property
     def nu(self) -> int:
@@ -177,8 +179,53 @@ def _eval(st: _Struct, th: np.ndarray, segs, want_jac: bool):
                 h = sps.lfilter([1.0], C, v)
                 for k in range(1, st.nd + 1):
                     _shifted(J[r:r + L, st.d_sl.start + k - 1], h, k, 1.0)
+        if st.ic:
+            _project_ic(st, F, C, D, eps[r:r + L], J[r:r + L] if want_jac else None)
         r += L
     return eps, J
+
+
+def _ic_basis(st: _Struct, F, C, D, L: int) -> np.ndarray:
+    """Columns spanning the free responses of every filter's initial state in ε, plus an output offset.
+
+    The initial state of B_i/F_i adds to w_i a combination of the responses of 1/F_i to impulses at
+    t = 0 .. max(nf_i, nk_i + nb_i − 1) − 1 (seen in ε through D/C); that of D/C adds responses of 1/C.
+    A constant column takes the output offset left by removing the means of a not-at-rest record.
+    """
+    noise = st.nc > 0 or st.nd > 0
+    cols = [np.ones(L)]
+    for i in range(st.nu):
+        m = min(max(st.nf[i], st.nk[i] + st.nb[i] - 1), L)
+        if m == 0:
+            continue
+        imp = np.zeros((L, m))
+        imp[np.arange(m), np.arange(m)] = 1.0
+        x = sps.lfilter([1.0], F[i], imp, axis=0)
+        if noise:
+            x = sps.lfilter(D, C, x, axis=0)
+        cols.append(x)
+    mc = min(max(st.nc, st.nd), L)
+    if mc:
+        imp = np.zeros((L, mc))
+        imp[np.arange(mc), np.arange(mc)] = 1.0
+        cols.append(sps.lfilter([1.0], C, imp, axis=0))
+    return np.column_stack(cols)
+
+
+def _project_ic(st: _Struct, F, C, D, eps: np.ndarray, J: np.ndarray | None) -> None:
+    """Variable projection of the initial-state/offset nuisance parameters (in place).
+
+    ε ← P⊥ ε with P⊥ the projector off the span of :func:`_ic_basis`; J ← P⊥ J (Kaufman's
+    approximation, which drops the derivative of the basis itself). For the slow poles of governor
+    loops (time constants of minutes) the free response from a not-at-rest start otherwise dominates
+    the simulation error of OE/BJ and pulls the fit into wrong minima.
+    """
+    Phi = _ic_basis(st, F, C, D, eps.shape[0])
+    U, sv, _ = np.linalg.svd(Phi, full_matrices=False)
+    Q = U[:, sv > sv[0] * 1e-10]
+    eps -= Q @ (Q.T @ eps)
+    if J is not None:
+        J -= Q @ (Q.T @ J)
 
 
 def _ls(X: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -496,7 +543,7 @@ def _perturbed(st: _Struct, th: np.ndarray, rng: np.random.Generator) -> np.ndar
 
 
 # ===================================================================== public estimators
-def _check_orders(data: IdData, nb, nc, nd, nf, nk, method: str) -> _Struct:
+def _check_orders(data: IdData, nb, nc, nd, nf, nk, method: str, ic: str = "zero") -> _Struct:
     nu = data.nu
     nb = per_input(nb, nu, "nb")
     nf = per_input(nf, nu, "nf")
@@ -510,7 +557,9 @@ def _check_orders(data: IdData, nb, nc, nd, nf, nk, method: str) -> _Struct:
                 f"nb = {m} for input {data.input_names[i]!r}: {method} needs at least one B coefficient "
                 "per input (drop the input instead)"
             )
-    st = _Struct(nb, nc, nd, nf, nk)
+    if ic not in ("zero", "estimate"):
+        raise ValueError(f"ic = {ic!r}: use 'zero' or 'estimate'")
+    st = _Struct(nb, nc, nd, nf, nk, ic == "estimate")
     return st
 
 
@@ -550,7 +599,9 @@ def _from_init(st: _Struct, init: PolyModel) -> np.ndarray:
 
 
 def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, multistart: bool | str,
-         n_high: int | None, maxiter: int, tol: float, seed: int) -> PolyModel:
+         n_high: int | None, maxiter: int, tol: float, seed: int, covariance: str = "gauss") -> PolyModel:
+    if covariance not in ("gauss", "sandwich"):
+        raise ValueError(f"covariance = {covariance!r}: use 'gauss' or 'sandwich'")
     data.require_finite()
     data.require_exciting()
     n = data.N
@@ -627,7 +678,7 @@ def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, mult
     eps, J = _eval(st, th, segs, True)
     ssr = float(eps @ eps)
     lam = ssr / (n - st.p)
-    cov = _covariance(J, lam)
+    cov = _covariance(J, lam) if covariance == "gauss" else _sandwich(J, eps, data.bounds)
     rep = EstimationReport(
         method=method, n_samples=n, loss=ssr / n, iterations=best.iterations, converged=best.converged,
         stop_reason=best.stop_reason, algorithm=best.algorithm,
@@ -652,9 +703,49 @@ def _covariance(J: np.ndarray, lam: float) -> np.ndarray:
     return lam * inv / np.outer(scale, scale)
 
 
+def _hac_lag(eps: np.ndarray, bounds) -> int:
+    """Newey-West truncation lag: twice the lag after which the residual autocorrelation stays inside
+    ±2/√N for 5 lags, within [10, N/8]."""
+    n = eps.shape[0]
+    kmax = max(10, n // 8)
+    acf = np.zeros(kmax + 1)
+    for a, b in bounds:
+        e = eps[a:b]
+        L = e.shape[0]
+        f = np.fft.rfft(e, 2 * L)
+        c = np.fft.irfft(f * np.conj(f))[:min(L, kmax + 1)]
+        acf[:c.shape[0]] += c
+    acf /= acf[0] if acf[0] > 0 else 1.0
+    thr = 2.0 / np.sqrt(n)
+    inside = np.abs(acf) < thr
+    for k in range(1, kmax - 4):
+        if inside[k:k + 5].all():
+            return int(np.clip(2 * k, 10, kmax))
+    return kmax
+
+
+def _sandwich(J: np.ndarray, eps: np.ndarray, bounds) -> np.ndarray:
+    """Heteroscedasticity- and autocorrelation-consistent covariance of a prediction-error estimate.
+
+    P = H⁻¹ Ω H⁻¹, H = JᵀJ, Ω = Σ_{|τ|≤M} w_τ Σ_n g[n] g[n−τ]ᵀ, g[n] = J[n] ε[n] (within experiments),
+    Bartlett weights w_τ = 1 − |τ|/(M + 1), M from the residual correlation (:func:`_hac_lag`).
+    """
+    M = _hac_lag(eps, bounds)
+    g = J * eps[:, None]
+    Om = g.T @ g
+    for a, b in bounds:
+        gs = g[a:b]
+        for tau in range(1, min(M, b - a - 1) + 1):
+            G = gs[tau:].T @ gs[:-tau]
+            Om += (1.0 - tau / (M + 1.0)) * (G + G.T)
+    Hi = _covariance(J, 1.0)
+    return Hi @ Om @ Hi
+
+
 def bj(data: IdData, nb: int | Sequence[int], nc: int, nd: int, nf: int | Sequence[int],
        nk: int | Sequence[int] = 1, *, init: PolyModel | None = None, multistart: bool | str = "auto",
-       n_high: int | None = None, maxiter: int = 100, tol: float = 1e-10, seed: int = 0) -> PolyModel:
+       n_high: int | None = None, maxiter: int = 100, tol: float = 1e-10, seed: int = 0,
+       ic: str = "zero", covariance: str = "gauss") -> PolyModel:
     """Box-Jenkins model y = Σ B_i/F_i u_i + C/D e by prediction-error minimisation.
 
     Args:
@@ -667,23 +758,30 @@ def bj(data: IdData, nb: int | Sequence[int], nc: int, nd: int, nf: int | Sequen
         n_high: order of the high-order ARX used for initial values (default from N, at most 30).
         maxiter, tol: iteration limit and relative loss tolerance of the search.
         seed: seed of the perturbed restarts (the result is deterministic for a given seed).
+        ic: "zero" (every filter starts from rest) or "estimate" (each experiment's initial states and an
+            output offset are estimated by variable projection; use it for records that do not start at
+            rest, above all with slow poles).
+        covariance: "gauss" (λ̂(JᵀJ)⁻¹, white residuals) or "sandwich" (Newey-West HAC,
+            (JᵀJ)⁻¹ [Σ_τ w_τ Σ_n ψ[n]ε[n]ε[n−τ]ψ[n−τ]ᵀ] (JᵀJ)⁻¹, honest with coloured residuals:
+            Ljung 1999, §9.3).
 
     Returns:
         PolyModel with covariance λ̂(JᵀJ)⁻¹ and a report (iterations, loss, stop reason, start losses).
     """
-    st = _check_orders(data, nb, nc, nd, nf, nk, "bj")
+    st = _check_orders(data, nb, nc, nd, nf, nk, "bj", ic)
     return _pem(data, st, "bj", init=init, multistart=multistart, n_high=n_high, maxiter=maxiter, tol=tol,
-                seed=seed)
+                seed=seed, covariance=covariance)
 
 
 def oe(data: IdData, nb: int | Sequence[int], nf: int | Sequence[int], nk: int | Sequence[int] = 1, *,
        init: PolyModel | None = None, multistart: bool | str = "auto", n_high: int | None = None,
-       maxiter: int = 100, tol: float = 1e-10, seed: int = 0) -> PolyModel:
+       maxiter: int = 100, tol: float = 1e-10, seed: int = 0, ic: str = "zero",
+       covariance: str = "gauss") -> PolyModel:
     """Output-error model y = Σ B_i/F_i u_i + e (a BJ model with C = D = 1). Arguments as :func:`bj`.
 
     The covariance λ̂(JᵀJ)⁻¹ assumes white output noise; with coloured noise OE stays consistent in
-    open loop but that covariance is not the true one (use bj for honest bands).
+    open loop but that covariance is not the true one: use ``covariance="sandwich"`` (or bj).
     """
-    st = _check_orders(data, nb, 0, 0, nf, nk, "oe")
+    st = _check_orders(data, nb, 0, 0, nf, nk, "oe", ic)
     return _pem(data, st, "oe", init=init, multistart=multistart, n_high=n_high, maxiter=maxiter, tol=tol,
-                seed=seed)
+                seed=seed, covariance=covariance)
