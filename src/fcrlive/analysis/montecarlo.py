@@ -623,7 +623,7 @@ class StudyResult:
     cells: list[dict]
     """One dict per (snr_db, minutes, method): keys snr_db, minutes, method and :func:`summarise_cell`."""
     mean_responses: dict
-    """(snr_db, minutes, method) → {"G_1": mean |G| on GRID, ...}."""
+    """(snr_db, minutes, method) → {"G_1": mean |G| on GRID, "G_1_median": median |G|, ...}."""
     timing: dict
     out_dir: Path | None = None
 
@@ -662,7 +662,9 @@ def aggregate(cfg: StudyConfig, tr: Truth, results: Iterable[TaskResult]) -> tup
             A = np.concatenate(parts, axis=0) if parts else np.empty((0, GRID.size))
             with np.errstate(invalid="ignore"), warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                means[key][g] = np.nanmean(np.abs(A), axis=0) if len(A) else np.full(GRID.size, np.nan)
+                nan = np.full(GRID.size, np.nan)
+                means[key][g] = np.nanmean(np.abs(A), axis=0) if len(A) else nan
+                means[key][g + "_median"] = np.nanmedian(np.abs(A), axis=0) if len(A) else nan
     timing = {"sim_s_per_run": {f"{k}/{m:g}min": sim_s[k, m] / max(nruns[k, m], 1) for k, m in sim_s},
               "ident_s_per_run": {f"{m}/{mins:g}min": ident_s[m, mins] / max(
                   sum(1 for r in rows if r["method"] == m and r["minutes"] == mins), 1)
@@ -836,18 +838,20 @@ def make_figures(res: StudyResult, out_dir: Path) -> list[Path]:
     # Figs. 4-6: mean |G| over the runs vs the truth (longest datasets)
     mins = max(cfg.minutes)
     ms = [m for m in cfg.methods if m != "sine"]
-    if ms:
+    for stat, fname in (("", "fig4-6_mean_responses.png"), ("_median", "fig4-6_median_responses.png")):
+        if not ms:
+            break
         fig, axes = plt.subplots(1, 3, figsize=(13, 4))
         for ax, g in zip(axes, ("G_1", "S", "G_p")):
             ax.loglog(tr.grid, np.abs(tr.responses[g]), "k-", lw=2, label="analytic")
             for m in ms:
                 for s in snrs:
-                    mr = res.mean_responses.get((s, mins, m), {}).get(g)
+                    mr = res.mean_responses.get((s, mins, m), {}).get(g + stat)
                     if mr is None or not np.any(np.isfinite(mr)):
                         continue
                     ax.loglog(tr.grid, mr, color=_COLORS[m], ls=_STYLES.get(s, "-."),
                               label=f"{METHOD_LABELS[m]}, {s:g} dB")
-            if g == "G_p" and "sine" in cfg.methods:
+            if g == "G_p" and "sine" in cfg.methods and not stat:
                 for s in snrs:
                     c = _cell(cells, s, mins, "sine")
                     if c and "gp" in c:
@@ -855,11 +859,11 @@ def make_figures(res: StudyResult, out_dir: Path) -> list[Path]:
                         mag = np.abs(tr.gp) * (1 + np.array(c["gp"]["rel_bias_abs"]))
                         ax.loglog(w, mag, ls="none", marker="x", color=_COLORS["sine"],
                                   label=f"sine test, {s:g} dB")
-            ax.set_title(f"mean |{g}| over the runs, {mins:g} min")
+            ax.set_title(f"{'median' if stat else 'mean'} |{g}| over the runs, {mins:g} min")
             ax.set_xlabel("ω [rad/s]")
             ax.grid(True, which="both", alpha=0.3)
         axes[0].legend(fontsize=7)
-        save(fig, "fig4-6_mean_responses.png")
+        save(fig, fname)
     return paths
 
 
