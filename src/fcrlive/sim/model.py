@@ -166,6 +166,7 @@ class Model:
     two_h_g0: np.ndarray  # 2 h0 / g0
     inv_2H: np.ndarray
     inv_Tw: np.ndarray
+    neg_inv_Tw: np.ndarray
     g_lim2: tuple[float, float]
     inv_Tg2: float
     any_dturb: bool
@@ -315,6 +316,7 @@ def build(plant: Plant) -> Model:
         two_h_g0=col([2 * tp1.h0 / tp1.g0, 2 * tp2.h0 / tp2.g0]),
         inv_2H=col([1 / (2 * u1.swing.H), 1 / (2 * u2.swing.H)]),
         inv_Tw=col([1 / t1.Tw, 1 / t2.Tw]),
+        neg_inv_Tw=-col([1 / t1.Tw, 1 / t2.Tw]),
         g_lim2=(u2.servo.g_min, u2.servo.g_max),
         inv_Tg2=1.0 / u2.servo.Tg,
         any_dturb=bool(t1.Dturb != 0 or t2.Dturb != 0),
@@ -333,19 +335,27 @@ def residual(m: Model, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarr
         out = np.empty((5, R))
     dq = x[Q1:Q2 + 1]
     dg = x[G1:G2 + 1]
-    q = dq + m.q0
-    g = np.maximum(dg + m.g0, 1e-6)  # a closed gate would make the head infinite
-    h = q / g
-    h *= h
-    hh = h - m.h0
-    dd = hh - (m.two_h_q0 * dq - m.two_h_g0 * dg)
-    pm = m.qn0 * dd
-    pm += hh * dq
-    pm *= m.At
+    # in place, three temporaries (the same operations in the same order as the formulas above)
+    a = np.add(dq, m.q0)  # q
+    b = np.add(dg, m.g0)
+    np.maximum(b, 1e-6, out=b)  # g: a closed gate would make the head infinite
+    np.divide(a, b, out=a)
+    np.multiply(a, a, out=a)  # h
+    np.subtract(a, m.h0, out=a)  # hh = h − h0
+    np.multiply(m.two_h_q0, dq, out=b)
+    c = np.multiply(m.two_h_g0, dg)
+    np.subtract(b, c, out=b)  # Δh_lin
+    np.subtract(a, b, out=b)  # dd
+    np.multiply(m.qn0, b, out=c)
     if m.any_dturb:
-        pm -= m.Dturb * dg * x[W1:W2 + 1]
-    np.multiply(pm, m.inv_2H, out=out[0:2])
-    np.multiply(dd, -m.inv_Tw, out=out[2:4])
+        pm_d = m.Dturb * dg * x[W1:W2 + 1]
+    np.multiply(a, dq, out=a)
+    c += a
+    c *= m.At  # pm
+    if m.any_dturb:
+        c -= pm_d
+    np.multiply(c, m.inv_2H, out=out[0:2])
+    np.multiply(b, m.neg_inv_Tw, out=out[2:4])
     c2 = m.c2_row[F2] * x[F2] + m.c2_row[I2] * x[I2]
     if m.c2_row[G2] != 0.0:
         c2 += m.c2_row[G2] * x[G2]

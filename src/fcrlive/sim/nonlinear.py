@@ -211,11 +211,11 @@ def run_single(plant, inp: Inputs, *, open_loop: bool = False, nonlinear: bool =
     """One run from the steady state (module docstring); returns the :data:`RAW` signals, length N."""
     st = Stepper(plant, open_loop=open_loop, integrator=integrator, substeps=substeps, nonlinear=nonlinear)
     cl = lin.closed_loop(plant, open_loop)
-    w = _w_matrix(inp)
-    z = lin.recursion(cl.Phi, cl.Gam @ w)  # the linear model: exact when nonlinear=False and "exp"
-    if nonlinear and integrator == "exp":
-        z = _fixed_point_exp(st, cl, inp, z, tol, max_iter)
-    elif integrator != "exp":
+    if integrator == "exp":
+        # the linear model (exact when nonlinear=False), then the nonlinear fixed point
+        z = _fixed_point_exp(st, cl, inp, tol, max_iter if nonlinear else 0)
+    else:
+        z = lin.recursion(cl.Phi, cl.Gam @ _w_matrix(inp))  # the linear model as the first guess
         nx = st.nx
         for _ in range(max_iter):
             x, i1 = z[:nx], z[nx]
@@ -234,43 +234,136 @@ def run_single(plant, inp: Inputs, *, open_loop: bool = False, nonlinear: bool =
     return _outputs_from_states(st, z[:st.nx], z[st.nx], inp)
 
 
-def _fixed_point_exp(st: Stepper, cl, inp: Inputs, z_lin: np.ndarray, tol: float,
-                     max_iter: int) -> np.ndarray:
-    """The waveform fixed point for the exponential integrator, iterating on the nonlinear correction.
+def _fixed_point_exp(st: Stepper, cl, inp: Inputs, tol: float, max_iter: int) -> np.ndarray:
+    """The linear run and the waveform fixed point for the exponential integrator.
 
     Each step is the linear closed-loop step plus δ[n] = GN0 N[n] + GN1 (N[n] − N[n−1]) + Gc Δc_lim +
-    e_i Δi_lim (residuals and limiter corrections along the current iterate), so z = z_lin + recursion(δ)
-    with δ evaluated for all samples at once.
+    e_i Δi_lim (residuals and limiter corrections along the current iterate), so z = recursion(Gam w + δ)
+    with δ evaluated for all samples at once (``max_iter`` = 0: the linear run). All inputs go through
+    ONE product with the modal projections of their columns, ``[Gam, GN0 + GN1, −GN1, Gc, e_i]``, on
+    the stacked channels ``[w; N[n]; N[n−1]; Δc_lim; Δi_lim]`` (the limiter rows only when a limit is
+    hit), and every iteration works in preallocated buffers (fresh arrays of this size cost page faults).
     """
     m, nx = st.m, st.nx
-    nz, N = z_lin.shape
+    nz, nw, N = cl.nz, len(lin.INPUTS), len(inp.r)
     md = lin.modal(cl.Phi)
     if md is None:
-        return _step_all(st, inp)
+        z = lin.recursion(cl.Phi, cl.Gam @ _w_matrix(inp))
+        return z if max_iter == 0 else _step_all(st, inp)
     nN = len(mdl.RESIDUAL_ROWS)
-    Gch = np.zeros((nz, 2 * nN + 2))  # channels: N, N − N[n−1], Δc_lim, Δi_lim
-    Gch[:nx, :nN] = m.GN0
-    Gch[:nx, nN:2 * nN] = m.GN1
-    Gch[:nx, 2 * nN] = m.Gc
-    Gch[nx, 2 * nN + 1] = 1.0
-    proj = md.proj @ Gch
-    ch = np.empty((2 * nN + 2, N))
-    z = z_lin
+    Pin = _input_projection(md, cl)
+    # channel rows: w (nw), N[n] (nN), N[n − 1] (nN), Δc_lim, Δi_lim
+    ch = np.empty((nw + 2 * nN + 2, N))
+    ch[:nw] = _w_matrix(inp)
+    z = np.empty((nz, N))
+    q = np.empty((nz, N))
+    g = np.empty((nz, N))
+    np.matmul(Pin[:, :nw], ch[:nw], out=g)
+    lin.back_project(md, lin.filter_modes(md, g, out=q), out=z)
+    if max_iter == 0:
+        return z
+    # Precondition with the residual's Jacobian J at the mean state of the linear run (the deviations
+    # drift with the random-walk load): iterate with the LTI operator Phi + A0 J on the channels
+    # N[n] − J z[n] instead of N[n] (A0 = [GN0 + GN1; 0] the columns of N[n]). The fixed point, the
+    # stepped trajectory, is the same; the contraction is faster.
+    J = _residual_jacobian(m, z[:nx].mean(axis=1))
+    jc = np.flatnonzero(np.any(J != 0.0, axis=0))
+    if len(jc):
+        A0 = np.zeros((nz, nN))
+        A0[:nx] = m.GN0 + m.GN1
+        mdK = lin.modal_form(cl.Phi + A0 @ np.hstack([J, np.zeros((nN, nz - nx))]))
+        if mdK is not None:
+            md = mdK
+            Pin = _input_projection(md, cl, cache=False)
+            j0, j1 = int(jc[0]), int(jc[-1]) + 1
+            J = np.ascontiguousarray(J[:, j0:j1])
+        else:
+            jc = jc[:0]
+    k, g0 = st.k, st.g0
+    ew = inp.r - inp.v  # ε without the speed feedback
+    if inp.app is not None and st.open_loop:
+        ew = ew - inp.app
+    nlim = nw + 2 * nN
+    Nn, Np = ch[nw:nw + nN], ch[nw + nN:nlim]
+    z_new = np.empty((nz, N))
+    dz = np.empty((nz, N))
+    buf = np.empty(N)
     for _ in range(max_iter):
         x, i1 = z[:nx], z[nx]
-        _, _, _, dc, i1n, dcr, i1n_lin = st.control_full(x, i1, inp.r, inp.v, inp.app)
-        Nn = mdl.residual(m, x, out=ch[:nN])
-        ch[nN:2 * nN, 0] = 0.0
-        np.subtract(Nn[:, 1:], Nn[:, :-1], out=ch[nN:2 * nN, 1:])
-        np.subtract(dc, dcr, out=ch[2 * nN])
-        np.subtract(i1n, i1n_lin, out=ch[2 * nN + 1])
-        z_new = z_lin + lin.filter_projected(md, proj @ ch)
-        scale = np.max(np.abs(z_new), axis=1) + 1e-300
-        delta = float(np.max(np.max(np.abs(z_new - z), axis=1) / scale))
-        z = z_new
+        # unit 1's demand, to see whether it hits a limit anywhere (then the exact limiter corrections)
+        if st.open_loop:
+            np.multiply(ew, k.ce, out=buf)
+        else:
+            np.subtract(ew, x[mdl.F1], out=buf)
+            buf *= k.ce
+        buf += k.ci * i1
+        if k.cg != 0.0:
+            buf += k.cg * x[mdl.G1]
+        buf += g0
+        n_ch = nlim
+        if buf.max() > st.g_max or buf.min() < st.g_min:
+            _, _, _, dc, i1n, dcr, i1n_lin = st.control_full(x, i1, inp.r, inp.v, inp.app)
+            if dc is not dcr:
+                np.subtract(dc, dcr, out=ch[nlim])
+                np.subtract(i1n, i1n_lin, out=ch[nlim + 1])
+                n_ch = nlim + 2
+        mdl.residual(m, x, out=Nn)
+        Np[:, 0] = Nn[:, 0]  # N[−1] := N[0]
+        Np[:, 1:] = Nn[:, :-1]
+        if len(jc):
+            Nn -= J @ x[j0:j1]
+        np.matmul(Pin[:, :n_ch], ch[:n_ch], out=g)
+        lin.filter_modes(md, g, out=q)
+        lin.back_project(md, q, out=z_new)
+        np.subtract(z_new, z, out=dz)
+        step = np.maximum(dz.max(axis=1), -dz.min(axis=1))
+        scale = np.maximum(z_new.max(axis=1), -z_new.min(axis=1)) + 1e-300
+        delta = float(np.max(step / scale))
+        z, z_new = z_new, z
         if delta < tol:
             return z
     return _step_all(st, inp)
+
+
+_PIN_CACHE: dict[int, tuple[object, np.ndarray]] = {}
+
+
+def _residual_jacobian(m: mdl.Model, x: np.ndarray) -> np.ndarray:
+    """∂N/∂x (rows :data:`model.RESIDUAL_ROWS`, columns the states) at the state ``x`` (central differences;
+    it only preconditions the iteration)."""
+    nx = len(x)
+    h = 1e-6
+    X = np.repeat(x[:, None], 2 * nx, axis=1)
+    for j in range(nx):
+        X[j, 2 * j] += h
+        X[j, 2 * j + 1] -= h
+    R = mdl.residual(m, X)
+    J = (R[:, 0::2] - R[:, 1::2]) / (2.0 * h)
+    J[np.abs(J) < 1e-12] = 0.0
+    return J
+
+
+def _input_projection(md, cl, cache: bool = True) -> np.ndarray:
+    """Modal projections of the input columns ``[Gam, GN0 + GN1, −GN1, Gc, e_i]`` (cached per loop)."""
+    hit = _PIN_CACHE.get(id(cl)) if cache else None
+    if hit is not None and hit[0] is cl:
+        return hit[1]
+    m, nx = cl.model, cl.model.nx
+    nN = len(mdl.RESIDUAL_ROWS)
+    cols = np.zeros((cl.nz, len(lin.INPUTS) + 2 * nN + 2))
+    nw = len(lin.INPUTS)
+    cols[:, :nw] = cl.Gam
+    cols[:nx, nw:nw + nN] = m.GN0 + m.GN1
+    cols[:nx, nw + nN:nw + 2 * nN] = -m.GN1
+    cols[:nx, nw + 2 * nN] = m.Gc
+    cols[nx, nw + 2 * nN + 1] = 1.0
+    Pin = np.ascontiguousarray(md.proj @ cols)
+    if not cache:
+        return Pin
+    if len(_PIN_CACHE) > 64:
+        _PIN_CACHE.clear()
+    _PIN_CACHE[id(cl)] = (cl, Pin)
+    return Pin
 
 
 def _step_all(st: Stepper, inp: Inputs) -> np.ndarray:
