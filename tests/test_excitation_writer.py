@@ -60,10 +60,15 @@ async def test_out_of_bounds_values_are_never_sent(bad):
 
 
 async def test_device_clamp_below_the_amplitude_is_refused_on_connect():
-    async with governor(excitation_limit_hz=0.05) as dev, _writer(dev.port) as w:
-        with pytest.raises(ExcitationFault, match=r"clamps the excitation at 0\.05"):
-            await w.write(0.0)
-    assert dev.commands == []  # refused before anything was written
+    async with governor(excitation_limit_hz=0.05) as dev:
+        async with _writer(dev.port) as w:
+            with pytest.raises(ExcitationFault, match=r"clamps the excitation at 0\.05"):
+                await w.write(0.05)
+        assert [c[1:3] for c in dev.commands] == [(0.0, 0)]  # refused: only a zero was written
+        with pytest.raises(ExcitationFault, match="clamps"):  # the task refuses at once
+            async with make_task(dev.port):
+                pass
+        assert all(c[1:3] == (0.0, 0) for c in dev.commands)
 
 
 async def test_readback_mismatch_is_a_fault():
@@ -81,8 +86,8 @@ async def test_wrong_word_order_is_caught_before_any_write():
     wrong = replace(RMAP, word_order="little")
     async with governor() as dev, _writer(dev.port, rmap=wrong) as w:
         with pytest.raises(ExcitationFault):
-            await w.write(0.0)
-    assert dev.commands == []
+            await w.write(0.05)
+    assert all(c[1:3] == (0.0, 0) for c in dev.commands)  # 0.0 reads the same in either word order
 
 
 async def test_heartbeat_timeout_too_short_for_the_write_period():

@@ -210,7 +210,11 @@ class ExcitationTask:
 
     async def __aenter__(self) -> ExcitationTask:
         self._entered = True
-        ok = await self.writer.zero(deadline_s=max(self.zero_deadline_s, 2.0))
+        try:
+            ok = await self.writer.zero(deadline_s=max(self.zero_deadline_s, 2.0))
+        except ExcitationFault:
+            self.writer.close()
+            raise
         if not ok:
             log.warning("excitation: the device did not take a zero at start (%s); will keep trying",
                         self.writer.last_error)

@@ -35,6 +35,7 @@ write/read-back pair. It reuses the daemon's register map and codecs (``fcrlive.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import math
 import time
@@ -428,7 +429,11 @@ class ExcitationWriter:
             return WriteResult(False, None, v, error="not connected")
         forced = not self._armed
         if forced:
-            err = await self._read_info()
+            try:
+                err = await self._read_info()
+            except ExcitationFault:  # unsafe to drive: still leave a zero behind on this connection
+                await self._best_effort_zero()
+                raise
             if err:
                 self.stats.write_failures += 1
                 self._note("info", err)
@@ -451,18 +456,27 @@ class ExcitationWriter:
 
     async def zero(self, deadline_s: float = 1.0) -> bool:
         """Best effort: write 0.0 (enable 0) and read it back, reconnecting if needed, for up to
-        ``deadline_s`` [s]. True when the device acknowledged and holds zero. Never raises for link errors."""
+        ``deadline_s`` [s]. True when the device acknowledged and holds zero. Never raises for link errors;
+        on the first contact with a device that is unsafe to drive (clamp below the amplitude, heartbeat
+        timeout too short) it writes the zero and then raises ExcitationFault."""
         end = time.monotonic() + deadline_s
+        unsafe: ExcitationFault | None = None
         while True:
             self._next_connect = min(self._next_connect, time.monotonic())  # no backoff on the way out
             if await self._ensure_client():
                 try:
-                    if self._hb is None:
-                        await self._read_info()
+                    if self._hb is None:  # first contact: device checks (an unsafe device still gets zero)
+                        try:
+                            await self._read_info()
+                        except ExcitationFault as exc:
+                            unsafe = exc
                     err, _ = await self._send(0.0)
                 except ExcitationFault as exc:  # a mismatch on a zero write: report, keep trying
                     err = str(exc)
                 if not err:
+                    if unsafe is not None:
+                        self._armed = False
+                        raise unsafe
                     self._armed = True
                     return True
                 self._note("zero", err)
@@ -471,6 +485,13 @@ class ExcitationWriter:
                              "reset the offset", self.last_error)
                 return False
             await asyncio.sleep(0.05)
+
+    async def _best_effort_zero(self) -> None:
+        with contextlib.suppress(ExcitationFault):
+            err, _ = await self._send(0.0)
+            if err:
+                self._note("zero", err)
+        self._armed = False
 
     async def read_measurements(self) -> Measurement | None:
         """Read the input points the guard needs; None on a link error (the link is then disarmed)."""
