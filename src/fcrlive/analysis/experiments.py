@@ -19,6 +19,16 @@ keeps the ordering. Gaps (``PlantSignals.segments``) split the data into experim
 filtered from rest and its first ``skip_s`` seconds (filter transient) dropped; means are removed per
 experiment.
 
+The input u
+-----------
+The swing relation y = G_J(ΔPm − u) holds between the continuous signals; a discrete model with a direct
+term b₀ u[m] (nk = 0) integrates u over (m−1, m] by the backward rectangle rule, half a step (0.25 s at
+0.5 s) of phase error, which biased max|G_1| of Z_cu by −2..−5 % (noise-free as well). Worse, u[m]
+responds to the process noise inside that interval, so every extra u coefficient fitted the noise
+(+60..+240 % with nb_u = 2). :func:`prepare` therefore samples u at the MIDPOINT of each interval
+(half a step earlier): b₀ u[m] is then the midpoint rule and u[m] ends before the noise of the last half
+step. Measured on paper-plant1 at 12 dB: max|G_1| of Z_cu within ±0.7 % on seeds 0-2.
+
 Every OE/BJ fit (``FIT``) estimates each experiment's initial filter states and output offset by variable
 projection (``ic="estimate"``): the records never start at rest and the loop's slow poles (τ ≈ 70-114 s)
 make the free response from a wrong initial state dominate a from-rest simulation error. Without it
@@ -107,8 +117,13 @@ def prepare(
     ts_id: float = DEFAULT_TS_ID,
     skip_s: float | None = None,
     names: Sequence[str] = ("y", "u", "r", "epsilon", "c", "a"),
+    u_midpoint: bool = True,
 ) -> Prepared:
     """Causal anti-aliasing, decimation to ``ts_id`` and per-segment splitting (module docstring).
+
+    ``u_midpoint``: u is sampled half an identification step EARLIER than the other signals (linear
+    interpolation of the filtered log-rate signal), so that u[m] stands for the middle of the interval
+    (m−1, m] (module docstring, "The input u").
 
     Signals that are None in ``signals`` are left out. Raises DataError when nothing long enough remains.
     """
@@ -128,8 +143,14 @@ def prepare(
         for k in avail:
             x = np.asarray(getattr(signals, k), float)[a:b]
             x = x - x.mean()
-            xf = sps.lfilter(ba[0], ba[1], x)[::q] if ba is not None else x
-            out[k].append(xf[skip:])
+            xf = sps.lfilter(ba[0], ba[1], x) if ba is not None else x
+            if k == "u" and u_midpoint:
+                # fractional index q·m − q/2: the midpoint of the identification interval
+                lo, hi = np.arange(0, len(x), q) - q // 2, np.arange(0, len(x), q) - (q + 1) // 2
+                xf = 0.5 * (xf[np.maximum(lo, 0)] + xf[np.maximum(hi, 0)])
+            else:
+                xf = xf[::q]
+            out[k].append(xf[max(skip, 1):])
         starts.append(n)
         n += len(out[avail[0]][-1])
     if not starts:
