@@ -147,7 +147,6 @@ def test_tso_verdicts_agree_with_analytic(zcu_run, tso_ref):
         assert v.k_red_dyn == pytest.approx(r.k_red_dyn, rel=0.05)
 
 
-@pytest.mark.xfail(strict=False, reason="the band margin inherits the −2 % bias of max|G_1| (same cause)")
 def test_tso_margin_inside_interval(zcu_run, tso_ref):
     for k, v in zcu_run.report.tso.items():
         lo = v.stability_margin_band_lower

@@ -95,6 +95,13 @@ class Prepared:
     starts: tuple[int, ...]
     duration_s: float
     """Usable duration after decimation [s]."""
+    u_lead_s: float = 0.0
+    """How much earlier than the other signals u is sampled [s] (``u_midpoint``: Ts/2)."""
+
+    def u_delay(self, omega: np.ndarray) -> FreqResp:
+        """e^{−jωτ}, τ = ``u_lead_s``: (response fitted from the early-sampled u) × this = the true one."""
+        w = np.atleast_1d(np.asarray(omega, float))
+        return FreqResp.known(w, np.exp(-1j * w * self.u_lead_s))
 
     def iddata(self, output: str, inputs: Sequence[str]) -> IdData:
         return IdData(
@@ -159,7 +166,8 @@ def prepare(
             where=", ".join(signals.sources) or None,
         )
     sig = {k: np.concatenate(v) for k, v in out.items()}
-    return Prepared(ts_new, q, sig, tuple(starts), n * ts_new)
+    lead = (0.5 * q * Ts if q > 1 else 0.5 * Ts) if u_midpoint and "u" in avail else 0.0
+    return Prepared(ts_new, q, sig, tuple(starts), n * ts_new, lead)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -368,7 +376,7 @@ def zcu(
     def responses(omega) -> dict[str, FreqResp]:
         w = np.atleast_1d(np.asarray(omega, float))
         G_jp = m_cu.freqresp(w, "c")
-        G_J = -m_cu.freqresp(w, "u")
+        G_J = -m_cu.freqresp(w, "u") * prep.u_delay(w)
         G_s = m_ca.freqresp(w, 0)
         x = G_s if ctl.signal == "gate" else 1.0
         # c/ε = G_c/(1 + ρ K_ρ G_x), the integrator of G_c and K_ρ cancelling
@@ -404,11 +412,11 @@ def _eps_form(
     return prep, m, d
 
 
-def _eps_responses(m: PolyModel) -> Responses:
+def _eps_responses(m: PolyModel, prep: Prepared) -> Responses:
     def responses(omega) -> dict[str, FreqResp]:
         w = np.atleast_1d(np.asarray(omega, float))
         G_a = m.freqresp(w, "epsilon")  # G_J G_p
-        G_J = -m.freqresp(w, "u")
+        G_J = -m.freqresp(w, "u") * prep.u_delay(w)
         S = 1.0 / (1.0 + G_a)
         return {"G_1": G_J * S, "S": S, "G_p": G_a / G_J, "G_J": G_J}
 
@@ -443,7 +451,7 @@ def zur(
         d.N,
         prep.duration_s,
         models,
-        _eps_responses(m),
+        _eps_responses(m, prep),
         ("G_1", "S", "G_p"),
         None,
         val,
@@ -469,7 +477,7 @@ def zu(
 
     def responses(omega) -> dict[str, FreqResp]:
         w = np.atleast_1d(np.asarray(omega, float))
-        return {"G_1": m.freqresp(w, 0)}
+        return {"G_1": m.freqresp(w, 0) * prep.u_delay(w)}
 
     val, warns = _validate({"ε ← u": (m, d)})
     warns.append("no excitation: S and G_p cannot be identified from this log (paper Section 6.3)")
