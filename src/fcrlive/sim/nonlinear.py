@@ -415,6 +415,301 @@ def run_batch(plant, N: int, seeds, *, r: np.ndarray, app: np.ndarray | None, si
     """Realisations of ``seeds`` stepped together. Returns the requested :data:`RAW` fields (plus "v",
     "load") as (N, R) arrays. Draws of each stream are made in blocks, which gives the same numbers as
     one draw of N (numpy's Generator is sequential)."""
+    if integrator == "exp":
+        return _run_batch_exp(plant, N, seeds, r=r, app=app, sigma_l=sigma_l, sigma_v=sigma_v,
+                              load_det=load_det, fields=fields, open_loop=open_loop, nonlinear=nonlinear,
+                              chunk=block)
+    return _run_batch_stepper(plant, N, seeds, r=r, app=app, sigma_l=sigma_l, sigma_v=sigma_v,
+                              load_det=load_det, fields=fields, open_loop=open_loop, nonlinear=nonlinear,
+                              integrator=integrator, substeps=substeps, block=block)
+
+
+def run_batch_linear(plant, N: int, seeds, *, r: np.ndarray, app: np.ndarray | None, sigma_l: float,
+                     sigma_v: float, load_det: np.ndarray | None, fields, open_loop: bool = False,
+                     block: int = 2048) -> dict[str, np.ndarray]:
+    """The linear model's batch: one matrix product per sample (:func:`run_batch` without the residual)."""
+    return _run_batch_exp(plant, N, seeds, r=r, app=app, sigma_l=sigma_l, sigma_v=sigma_v,
+                          load_det=load_det, fields=fields, open_loop=open_loop, nonlinear=False, chunk=block)
+
+
+class _BatchPlan:
+    """The exponential step of :class:`Stepper` for many runs as ONE matrix product per sample.
+
+    Per sample n a column block (rows, runs) holds ``[E; z; w; s; s_prev]``: E derived rows of z (the
+    absolute turbine flows and gates, the linearised head change, unit 1's demand without its input
+    part, unit 2's demand), z = [x; i1], w = [ε_w = r − v (− y_app), ΔP_L[n], ΔP_L[n+1], 1], s = the
+    residual channels [dd; hh·Δq; limiter of unit 2] at n (the residual N = Kmap s), s_prev those at
+    n − 1. Then ``[E; z]`` at n + 1 = ``M @ [z; w; s; s_prev]`` at n: the closed loop of the linear
+    governor (Phi, Gam of :func:`linear.closed_loop`) plus the ETD2 residual terms (GN0 + GN1) N[n] −
+    GN1 N[n−1]. Unit 1's limiter (rare) is applied as a correction of that product.
+    """
+
+    def __init__(self, plant, open_loop: bool, nonlinear: bool):
+        cl = lin.closed_loop(plant, open_loop)
+        m = cl.model
+        self.m, self.cl = m, cl
+        nx, nz = m.nx, cl.nz
+        self.nonlinear = nonlinear
+        self.dturb = bool(nonlinear and m.any_dturb)
+        # derived rows E (as rows over z, plus offsets through the row of ones)
+        E: list[np.ndarray] = []
+        e_off: list[float] = []
+        if nonlinear:
+            for rows, off in (((mdl.Q1, mdl.Q2), m.q0[:, 0]), ((mdl.G1, mdl.G2), m.g0[:, 0])):
+                for j, row in enumerate(rows):
+                    e = np.zeros(nz)
+                    e[row] = 1.0
+                    E.append(e)
+                    e_off.append(float(off[j]))
+            for j, (q, g) in enumerate(((mdl.Q1, mdl.G1), (mdl.Q2, mdl.G2))):
+                e = np.zeros(nz)
+                e[q] = m.two_h_q0[j, 0]
+                e[g] = -m.two_h_g0[j, 0]
+                E.append(e)
+                e_off.append(0.0)
+            e = np.zeros(nz)
+            e[:nx] = m.c2_row
+            E.append(e)
+            e_off.append(m.tp2.g0)
+        e_dc = cl.C[lin.OUTPUTS.index("dc")].copy()  # Δc without the ε_w part
+        E.append(e_dc)
+        e_off.append(0.0)
+        self.ne = ne = len(E)
+        Ez = np.array(E)
+        self.QA, self.GA, self.LH, self.C2 = 0, 2, 4, 6
+        self.DCR = ne - 1
+        # the columns [z; w; s; s_prev]
+        nw = 4
+        ns = (5 + (2 if self.dturb else 0)) if nonlinear else 0
+        self.nz, self.nw, self.ns = nz, nw, ns
+        ncol = nz + nw + 2 * ns
+        Z = np.zeros((nz, ncol))
+        Z[:, :nz] = cl.Phi
+        iw = lin.INPUTS.index
+        Z[:, nz] = cl.Gam[:, iw("r")]  # ε_w (r, −v and −y_app enter alike)
+        Z[:, nz + 1] = cl.Gam[:, iw("pl0")]
+        Z[:, nz + 2] = cl.Gam[:, iw("pl1")]
+        if ns:
+            # N = Kmap s: turbines from dd and hh·Δq (and Δg·Δω), unit 2's limiter as it is
+            Kmap = np.zeros((5, ns))
+            a = (m.At * m.inv_2H)[:, 0]
+            for j in range(2):
+                Kmap[j, j] = a[j] * m.qn0[j, 0]
+                Kmap[j, 2 + j] = a[j]
+                Kmap[2 + j, j] = m.neg_inv_Tw[j, 0]
+                if self.dturb:
+                    Kmap[j, 5 + j] = -m.inv_2H[j, 0] * m.Dturb[j, 0]
+            Kmap[4, 4] = 1.0
+            Z[:nx, nz + nw:nz + nw + ns] = (m.GN0 + m.GN1) @ Kmap
+            Z[:nx, nz + nw + ns:] = -m.GN1 @ Kmap
+        Mtop = Ez @ Z
+        Mtop[:, nz + 3] += np.array(e_off)  # offsets through the row of ones
+        self.M = np.ascontiguousarray(np.vstack([Mtop, Z]))
+        self.e_off = np.array(e_off)
+        # unit 1's limiter corrections Δc (column Gc) and Δi1 (the integrator row) of the product
+        Cz = np.zeros((nz, 2))
+        Cz[:nx, 0] = m.Gc
+        Cz[nx, 1] = 1.0
+        self.Mc = np.vstack([Ez @ Cz, Cz])
+        self.rows = ne + nz + nw + 2 * ns
+
+
+def _run_batch_exp(plant, N: int, seeds, *, r: np.ndarray, app: np.ndarray | None, sigma_l: float,
+                   sigma_v: float, load_det: np.ndarray | None, fields, open_loop: bool, nonlinear: bool,
+                   chunk: int = 2048, nb: int = 128) -> dict[str, np.ndarray]:
+    """:func:`run_batch` with the exponential integrator (:class:`_BatchPlan`): per sample one matrix
+    product and a dozen small ufuncs; the outputs are formed afterwards for ``nb`` samples at once."""
+    seeds = list(seeds)
+    R = len(seeds)
+    pln = _BatchPlan(plant, open_loop, nonlinear)
+    m = pln.m
+    nz, nw, ns, ne = pln.nz, pln.nw, pln.ns, pln.ne
+    k = m.ctl1
+    g0 = m.tp1.g0
+    u1 = plant.unit
+    g_min, g_max = u1.servo.g_min, u1.servo.g_max
+    dc_hi, dc_lo = g_max - g0, g_min - g0
+    lo2, hi2 = m.g_lim2
+    kt = m.Tc * k.Ki
+    gens = [streams(s) for s in seeds]
+    fields = tuple(fields)
+    out = {f: np.empty((N, R)) for f in fields}
+    sl = sigma_l * math.sqrt(m.Tc)
+    chunk = max(nb, chunk - chunk % nb)
+    # row offsets in a sample's column block
+    oZ = ne
+    oW = oZ + nz
+    oS = oW + nw
+    oP = oS + ns
+    K = pln.rows
+    buf = np.zeros((nb + 1, K, R))
+    buf[:, oW + 3] = 1.0
+    M = pln.M
+    # per-sample views, made once: (block, product input, product output, Δc row, ε_w row,
+    # g, q, Δh_lin, unit 2's demand, dd, hh·Δq, Δq, Δg, Δω, limiter channel, s, s_prev, previous s)
+    V = []
+    for j in range(nb if ns else 0):
+        b = buf[j]
+        V.append((b, b[oZ:oP + ns], buf[j + 1, :oW], b[pln.DCR], b[oW], b[2:4], b[0:2], b[4:6], b[6],
+                  b[oS:oS + 2], b[oS + 2:oS + 4], b[oZ + mdl.Q1:oZ + mdl.Q2 + 1],
+                  b[oZ + mdl.G1:oZ + mdl.G2 + 1], b[oZ + mdl.W1:oZ + mdl.W2 + 1], b[oS + 4],
+                  b[oS:oS + ns], b[oP:oP + ns], buf[j - 1, oS:oS + ns] if j else None, b[oS + 5:oS + 7]))
+    xi_raw = np.empty((R, chunk))
+    ve_raw = np.empty((R, chunk))
+    ve = np.empty((chunk, R))
+    knots = np.empty((chunk + 1, R))
+    pl = np.zeros(R)
+    s_prev = np.zeros((ns, R))
+    hh = np.empty((2, R))
+    ce, h0, inv_tg2, dturb = k.ce, m.h0, m.inv_Tg2, pln.dturb
+    for c0 in range(0, N, chunk):
+        cn = min(chunk, N - c0)
+        # noise of this chunk: the same numbers as one draw of N per stream and run
+        if sl > 0:
+            for i, g in enumerate(gens):
+                g[LOAD].standard_normal(cn, out=xi_raw[i, :cn])
+            knots[0] = pl
+            np.multiply(xi_raw[:, :cn].T, sl, out=knots[1:cn + 1])
+            np.cumsum(knots[:cn + 1], axis=0, out=knots[:cn + 1])  # sequential: pl[n+1] = pl[n] + ξ[n]
+            pl = knots[cn].copy()
+        else:
+            knots[:cn + 1] = pl
+        if sigma_v > 0:
+            for i, g in enumerate(gens):
+                g[PROCESS].standard_normal(cn, out=ve_raw[i, :cn])
+            np.multiply(ve_raw[:, :cn].T, sigma_v, out=ve[:cn])
+        else:
+            ve[:cn] = 0.0
+        for b0 in range(0, cn, nb):
+            bn = min(nb, cn - b0)
+            n0 = c0 + b0
+            blk = buf[:bn]
+            v_b = ve[b0:b0 + bn]
+            # inputs of the block's samples
+            np.subtract(r[n0:n0 + bn, None], v_b, out=blk[:, oW])
+            if app is not None and open_loop:
+                blk[:, oW] -= app[n0:n0 + bn, None]
+            blk[:, oW + 1] = knots[b0:b0 + bn]
+            blk[:, oW + 2] = knots[b0 + 1:b0 + bn + 1]
+            if load_det is not None:
+                blk[:, oW + 1] += load_det[n0:n0 + bn, None]
+                blk[:, oW + 2] += load_det[n0 + 1:n0 + bn + 1, None]
+            if ns:
+                blk[:, oS + 4] = 0.0  # unit 2's limiter channel, set where it acts
+            if n0 == 0:
+                buf[0, :oW] = 0.0
+                buf[0, :ne] = pln.e_off[:, None]
+            if not ns:  # the linear model: the product alone
+                for j in range(bn):
+                    np.matmul(M, buf[j, oZ:oS], out=buf[j + 1, :oW])
+            for j in range(bn if ns else 0):
+                (b, inp, nxt, dcr, ew, ga, qa, lh, c2, s_dd, s_hq, dq, dg, dw, lim, s_all, s_p, s_pj,
+                 s_dw) = V[j]
+                # unit 1's demand: the derived row plus its ε_w part
+                dcr += ce * ew
+                sat = dcr.max() > dc_hi or dcr.min() < dc_lo
+                # turbines: h = (q/g)², dd = h − h0 − Δh_lin, hh·Δq; unit 2's limiter
+                np.maximum(ga, 1e-6, out=ga)
+                np.divide(qa, ga, out=hh)
+                np.multiply(hh, hh, out=hh)
+                hh -= h0
+                np.subtract(hh, lh, out=s_dd)
+                np.multiply(hh, dq, out=s_hq)
+                if dturb:
+                    np.multiply(dg, dw, out=s_dw)
+                if c2.max() > hi2 or c2.min() < lo2:
+                    np.maximum(c2, lo2, out=lim)
+                    np.minimum(lim, hi2, out=lim)
+                    lim -= c2
+                    lim *= inv_tg2
+                if j:
+                    s_p[...] = s_pj
+                else:
+                    if n0 == 0:
+                        s_prev[...] = s_all  # N[−1] := N[0]
+                    s_p[...] = s_prev
+                np.matmul(M, inp, out=nxt)
+                if sat:
+                    _batch_limit(pln, b, buf[j + 1], dcr, k, kt, g0, g_min, g_max, open_loop)
+            if ns:
+                s_prev[...] = buf[bn - 1, oS:oS + ns]
+            _batch_outputs(pln, blk, out, n0, bn, r, v_b, app, load_det, open_loop, nonlinear, g_min,
+                           g_max)
+            buf[0, :oW] = buf[bn, :oW]
+    return out
+
+
+def _batch_limit(pln: _BatchPlan, b, nxt, dcr, k, kt, g0, g_min, g_max, open_loop) -> None:
+    """Unit 1's limiter and anti-windup at one sample (as :meth:`Stepper.control_full`): corrects the
+    next sample's rows ``nxt`` for Δc − Δc_lin and i1⁺ − i1⁺_lin."""
+    oZ = pln.ne
+    x_f1 = b[oZ + mdl.F1]
+    x_g1 = b[oZ + mdl.G1]
+    i1 = b[oZ + pln.m.nx]
+    eps = b[oZ + pln.nz] if open_loop else b[oZ + pln.nz] - x_f1
+    inc = k.ie * eps + k.ii * i1
+    if k.ig != 0.0:
+        inc = inc + k.ig * x_g1
+    c = np.minimum(np.maximum(dcr + g0, g_min), g_max)
+    dc = c - g0
+    sat = c != dcr + g0
+    inc_lim = np.where(sat & ((dc - dcr) * inc < 0.0), 0.0, inc)
+    corr = np.vstack([dc - dcr, kt * inc_lim - kt * inc])
+    nxt[:oZ + pln.nz] += pln.Mc @ corr
+
+
+def _batch_outputs(pln: _BatchPlan, blk, out, n0, bn, r, v_b, app, load_det, open_loop, nonlinear, g_min,
+                   g_max) -> None:
+    """The requested RAW fields of ``bn`` samples from their column blocks ``blk`` (bn, rows, R)."""
+    m = pln.m
+    oZ = pln.ne
+    x = blk[:, oZ:oZ + m.nx].transpose(1, 0, 2)  # (nx, bn, R)
+    i1 = blk[:, oZ + m.nx]
+    sl = slice(n0, n0 + bn)
+    k = m.ctl1
+    need = set(out)
+    y = eps = None
+    if need & {"y", "epsilon", "c"}:
+        y = (app[sl, None] if open_loop else x[mdl.F1]) + v_b
+        eps = r[sl, None] - y
+    for f in out:
+        o = out[f][sl]
+        if f == "y":
+            o[...] = y
+        elif f == "epsilon":
+            o[...] = eps
+        elif f == "c":
+            dcr = k.ce * eps + k.ci * i1
+            if k.cg != 0.0:
+                dcr = dcr + k.cg * x[mdl.G1]
+            np.add(dcr, m.tp1.g0, out=o)
+            if nonlinear:
+                np.clip(o, g_min, g_max, out=o)
+        elif f == "a":
+            np.add(x[mdl.G1], m.tp1.g0, out=o)
+        elif f == "u":
+            o[...] = x[mdl.PF1]
+        elif f == "w_coi":
+            np.multiply(x[mdl.W1], m.C_coi[mdl.W1], out=o)
+            o += m.C_coi[mdl.W2] * x[mdl.W2]
+        elif f == "pm":
+            if nonlinear:
+                o[...] = mdl.pm1_absolute(m, x)
+            else:
+                np.add(np.tensordot(m.C_pm1, x, axes=1), m.tp1.Pm0, out=o)
+        elif f == "omega":
+            o[...] = x[mdl.W1]
+        elif f == "v":
+            o[...] = v_b
+        elif f == "load":
+            o[...] = blk[:, oZ + pln.nz + 1]
+
+
+def _run_batch_stepper(plant, N: int, seeds, *, r: np.ndarray, app: np.ndarray | None, sigma_l: float,
+                       sigma_v: float, load_det: np.ndarray | None, fields, open_loop: bool = False,
+                       nonlinear: bool = True, integrator: Integrator = "exp", substeps: int | None = None,
+                       block: int = 2048) -> dict[str, np.ndarray]:
+    """:func:`run_batch` with :class:`Stepper` (any integrator; the RK4 cross-check)."""
     seeds = list(seeds)
     R = len(seeds)
     st = Stepper(plant, open_loop=open_loop, integrator=integrator, substeps=substeps, nonlinear=nonlinear)
@@ -467,59 +762,4 @@ def run_batch(plant, N: int, seeds, *, r: np.ndarray, app: np.ndarray | None, si
                 elif f == "load":
                     o[n] = pl + (load_det[n] if load_det is not None else 0.0)
             x, i1, pl = x_next, i1n, pl1
-    return out
-
-
-def run_batch_linear(plant, N: int, seeds, *, r: np.ndarray, app: np.ndarray | None, sigma_l: float,
-                     sigma_v: float, load_det: np.ndarray | None, fields, open_loop: bool = False,
-                     block: int = 2048) -> dict[str, np.ndarray]:
-    """The linear model's batch: one matrix product per sample for states and all outputs."""
-    seeds = list(seeds)
-    R = len(seeds)
-    cl = lin.closed_loop(plant, open_loop)
-    m = cl.model
-    gens = [streams(s) for s in seeds]
-    nz, nw = cl.nz, len(lin.INPUTS)
-    idx = {"y": 0, "epsilon": 1, "c": 2, "a": 3, "u": 4, "w_coi": 5, "pm": 6, "omega": 7}
-    offset = {"c": m.tp1.g0, "a": m.tp1.g0, "pm": m.tp1.Pm0}
-    fields = tuple(fields)
-    rows = [idx[f] for f in fields if f in idx]
-    lin_fields = [f for f in fields if f in idx]
-    Pz = np.hstack([cl.Phi, cl.Gam])
-    Po = np.hstack([cl.C, cl.D])[rows]
-    out = {f: np.empty((N, R)) for f in fields}
-    sl = sigma_l * math.sqrt(m.Tc)
-    U = np.zeros((nz + nw, R))
-    Ux = np.zeros((nz + nw, R))
-    pl = np.zeros(R)
-    zeros = np.zeros(R)
-    for n0 in range(0, N, block):
-        nb = min(block, N - n0)
-        xi = _draw(gens, LOAD, nb, sl)
-        ve = _draw(gens, PROCESS, nb, sigma_v)
-        for j in range(nb):
-            n = n0 + j
-            v = ve[j] if ve is not None else zeros
-            pl1 = pl + xi[j] if xi is not None else pl
-            U[nz] = r[n]
-            U[nz + 1] = v
-            ld0 = load_det[n] if load_det is not None else 0.0
-            ld1 = load_det[n + 1] if load_det is not None else 0.0
-            U[nz + 2] = pl + ld0
-            U[nz + 3] = pl1 + ld1
-            if app is not None:
-                U[nz + 4] = app[n]
-            if rows:
-                o = Po @ U
-                for k, f in enumerate(lin_fields):
-                    out[f][n] = o[k]
-                    if f in offset:
-                        out[f][n] += offset[f]
-            if "v" in out:
-                out["v"][n] = v
-            if "load" in out:
-                out["load"][n] = U[nz + 2]
-            np.matmul(Pz, U, out=Ux[:nz])
-            U[:nz] = Ux[:nz]
-            pl = pl1
     return out
