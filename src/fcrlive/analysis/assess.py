@@ -94,6 +94,23 @@ def _peak(fr_fun, key: str, omega_max: float) -> PeakEstimate:
     return PeakEstimate(pk.value, pk.omega, pk.sd)
 
 
+def _memo(fr_fun, size: int = 256):
+    """fr_fun with its last ``size`` results kept by ω (the TSO checks ask value and sd at the same ω)."""
+    cache: dict[bytes, dict] = {}
+
+    def f(w):
+        w = np.atleast_1d(np.asarray(w, float))
+        k = w.tobytes()
+        hit = cache.get(k)
+        if hit is None:
+            if len(cache) >= size:
+                cache.pop(next(iter(cache)))
+            hit = cache[k] = fr_fun(w)
+        return hit
+
+    return f
+
+
 def _callable(fr_fun, key: str, scale: float = 1.0, what: str = "value"):
     def f(w):
         w = np.asarray(w, float)
@@ -123,7 +140,7 @@ def assess(
     if isinstance(result, SineExperiment):
         return _assess_sine(result, t_fme_s=t_fme_s, products=products)
     warns = list(result.warnings)
-    fr = result.responses
+    fr = _memo(result.responses)
     wmax = result.omega_max * 0.999
     g1_0 = fr(np.array([1e-7]))["G_1"]
     g = float(g1_0.value.real[0])

@@ -189,6 +189,8 @@ class FreqResp:
     # ----------------------------------------------------------------- algebra
     def _coerce(self, other) -> FreqResp:
         if isinstance(other, FreqResp):
+            if other.omega is self.omega or np.array_equal(other.omega, self.omega):
+                return other
             if other.omega.shape != self.omega.shape or not np.allclose(other.omega, self.omega,
                                                                          rtol=1e-12, atol=0):
                 raise ValueError("frequency responses on different frequency grids cannot be combined")
