@@ -180,23 +180,45 @@ def recursion(Phi: np.ndarray, d: np.ndarray) -> np.ndarray:
     return filter_projected(md, md.proj @ d)
 
 
+def reorder_modes(md: _Modal, first: np.ndarray) -> tuple[_Modal, int]:
+    """``md`` with the modes whose rows are flagged in ``first`` (a pair counts by its first row) moved
+    to the front; returns it and the number of rows they take."""
+    groups = [(row, 1) for row, _ in md.real] + [(row, 2) for row, _ in md.pairs]
+    groups.sort(key=lambda t: (not first[t[0]], t[0]))
+    order, new_row, n_first = [], {}, 0
+    for row, size in groups:
+        new_row[row] = len(order)
+        order += list(range(row, row + size))
+        if first[row]:
+            n_first += size
+    order_a = np.array(order)
+    res = _Modal(proj=md.proj[order_a], back=md.back[:, order_a],
+                 real=tuple(sorted((new_row[r], lam) for r, lam in md.real)),
+                 pairs=tuple(sorted(((new_row[r], lam) for r, lam in md.pairs), key=lambda t: t[0])))
+    return res, n_first
+
+
 def modal(Phi: np.ndarray) -> _Modal | None:
     """The real modal form used by :func:`recursion` (None if Phi is nearly defective)."""
     return _modal(Phi)
 
 
-def filter_modes(md: _Modal, g: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+def filter_modes(md: _Modal, g: np.ndarray, out: np.ndarray | None = None,
+                 rows: tuple[int, int] = (0, 1 << 30)) -> np.ndarray:
     """Modal states one sample early: ``q[n] = λ q[n−1] + g[n]`` per mode (q[−1] = 0), in the real rows
     of :class:`_Modal` (a complex pair's rows hold the real and imaginary part of its complex state).
 
     The states of z[n+1] = Phi z[n] + d[n] are then ``z[n] = md.back @ q[:, n−1]`` (z[0] = 0) for
-    ``g = md.proj @ d``: see :func:`back_project`.
+    ``g = md.proj @ d``: see :func:`back_project`. ``rows``: only the modes in these rows [start, end).
     """
     q = np.empty_like(g) if out is None else out
     one = np.ones(1)
     for row, lam in md.real:
-        q[row] = lfilter(one, np.array([1.0, -lam]), g[row])
+        if rows[0] <= row < rows[1]:
+            q[row] = lfilter(one, np.array([1.0, -lam]), g[row])
     for row, lam in md.pairs:
+        if not rows[0] <= row < rows[1]:
+            continue
         gc = np.empty(g.shape[1], dtype=complex)
         gc.real = g[row]
         gc.imag = g[row + 1]

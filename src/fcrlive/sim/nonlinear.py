@@ -262,6 +262,7 @@ def _fixed_point_exp(st: Stepper, cl, inp: Inputs, tol: float, max_iter: int) ->
     lin.back_project(md, lin.filter_modes(md, g, out=q), out=z)
     if max_iter == 0:
         return z
+    z[:, 0] = 0.0
     # Precondition with the residual's Jacobian J at the mean state of the linear run (the deviations
     # drift with the random-walk load): iterate with the LTI operator Phi + A0 J on the channels
     # N[n] − J z[n] instead of N[n] (A0 = [GN0 + GN1; 0] the columns of N[n]). The fixed point, the
@@ -274,20 +275,40 @@ def _fixed_point_exp(st: Stepper, cl, inp: Inputs, tol: float, max_iter: int) ->
         mdK = lin.modal_form(cl.Phi + A0 @ np.hstack([J, np.zeros((nN, nz - nx))]))
         if mdK is not None:
             md = mdK
-            Pin = _input_projection(md, cl, cache=False)
             j0, j1 = int(jc[0]), int(jc[-1]) + 1
             J = np.ascontiguousarray(J[:, j0:j1])
         else:
             jc = jc[:0]
+    # The iteration needs only the rows the residual and the governor read (the turbines, gates,
+    # filtered speeds, integrators; the speeds with Dturb): only they are formed and tested, and only
+    # the modes that reach them are filtered (not the power-measurement filter's); the rest at the end.
+    it_rows = [mdl.Q1, mdl.Q2, mdl.G1, mdl.G2, mdl.F1, mdl.F2, mdl.I2, nx]
+    if m.any_dturb:
+        it_rows += [mdl.W1, mdl.W2]
+    it_rows = sorted(it_rows)
+    bsub = np.abs(md.back[it_rows])
+    reach = np.max(bsub, axis=0) > 1e-13 * np.max(np.abs(md.back), axis=0)
+    for row, _ in md.pairs:
+        reach[row] = reach[row] or reach[row + 1]
+    md, n_it = lin.reorder_modes(md, reach)
+    Pin = _input_projection(md, cl, cache=False)
+    back_it = np.ascontiguousarray(md.back[:, :n_it])
+    # contiguous runs of it_rows for the products
+    runs: list[tuple[int, int]] = []
+    for row in it_rows:
+        if runs and runs[-1][1] == row:
+            runs[-1] = (runs[-1][0], row + 1)
+        else:
+            runs.append((row, row + 1))
     k, g0 = st.k, st.g0
     ew = inp.r - inp.v  # ε without the speed feedback
     if inp.app is not None and st.open_loop:
         ew = ew - inp.app
     nlim = nw + 2 * nN
     Nn, Np = ch[nw:nw + nN], ch[nw + nN:nlim]
-    z_new = np.empty((nz, N))
-    dz = np.empty((nz, N))
+    z_new = np.zeros((nz, N))  # rows outside it_rows stay finite (J is zero there)
     buf = np.empty(N)
+    deltas: list[float] = []
     for _ in range(max_iter):
         x, i1 = z[:nx], z[nx]
         # unit 1's demand, to see whether it hits a limit anywhere (then the exact limiter corrections)
@@ -313,16 +334,30 @@ def _fixed_point_exp(st: Stepper, cl, inp: Inputs, tol: float, max_iter: int) ->
         if len(jc):
             Nn -= J @ x[j0:j1]
         np.matmul(Pin[:, :n_ch], ch[:n_ch], out=g)
-        lin.filter_modes(md, g, out=q)
-        lin.back_project(md, q, out=z_new)
-        np.subtract(z_new, z, out=dz)
-        step = np.maximum(dz.max(axis=1), -dz.min(axis=1))
-        scale = np.maximum(z_new.max(axis=1), -z_new.min(axis=1)) + 1e-300
-        delta = float(np.max(step / scale))
+        lin.filter_modes(md, g, out=q, rows=(0, n_it))
+        delta = 0.0
+        for r0, r1 in runs:
+            np.matmul(back_it[r0:r1], q[:n_it, :-1], out=z_new[r0:r1, 1:])
+            for row in range(r0, r1):
+                a, b = z_new[row], z[row]
+                np.subtract(a, b, out=buf)
+                step = max(buf.max(), -buf.min())
+                scale = max(a.max(), -a.min()) + 1e-300
+                delta = max(delta, step / scale)
         z, z_new = z_new, z
-        if delta < tol:
-            return z
+        deltas.append(delta)
+        # stop when the estimated remaining error (linear convergence at the observed rate) is below tol
+        if delta < tol or (len(deltas) >= 3 and _remaining(deltas) < tol):
+            lin.filter_modes(md, g, out=q, rows=(n_it, nz))
+            return lin.back_project(md, q, out=z)
     return _step_all(st, inp)
+
+
+def _remaining(deltas: list[float]) -> float:
+    """Estimated distance to the fixed point after steps ``deltas`` of a linearly converging iteration:
+    δ ρ/(1 − ρ) with ρ the larger of the last two step ratios (infinite unless ρ < 0.5)."""
+    rho = max(deltas[-1] / deltas[-2], deltas[-2] / deltas[-3])
+    return deltas[-1] * rho / (1.0 - rho) if rho < 0.5 else math.inf
 
 
 _PIN_CACHE: dict[int, tuple[object, np.ndarray]] = {}
