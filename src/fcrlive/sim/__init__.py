@@ -306,7 +306,7 @@ def simulate(plant: Plant, config: SimConfig | None = None) -> SimResult:
     """One realisation of the closed loop (module docstring), from steady state at Pm0.
 
     A single run is solved as a waveform fixed point over the whole record (equal to stepping it, to
-    about 1e-10 relative): about 0.1-0.3 s for 1800 s at Tc = 0.02 s.
+    about 1e-10 relative): about 0.1 s for 1800 s at Tc = 0.02 s.
     """
     config = config or SimConfig()
     prep = _prepare(plant, config)

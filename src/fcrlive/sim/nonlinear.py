@@ -23,13 +23,17 @@ Integrators for step 2 (``integrator``):
 
 Three ways to run the same step map:
 
-- :func:`run_batch`: many realisations stepped together in numpy (runs on the trailing axis);
+- :func:`run_batch`: many realisations stepped together in numpy (runs on the trailing axis). With
+  ``"exp"`` one sample of all runs is ONE matrix product (:class:`_BatchPlan`: the linear closed loop,
+  the residual channels and rows derived from the state for the residual and the limiter checks) plus
+  about ten small ufuncs; the outputs are formed afterwards for blocks of samples.
 - :func:`run_single`: one realisation as a waveform fixed point: guess the trajectory (the linear
   model), evaluate the step map for ALL samples at once (time on the trailing axis), and solve the
-  linear recursion ``z[n+1] = Phi_cl z[n] + (S(z[n]) − Phi_cl z[n])`` with per-mode IIR filters
-  (scipy.signal.lfilter). The fixed point is exactly the stepped trajectory; a few iterations bring the
-  difference to round-off. If it does not converge (limiters active for long) it falls back to
-  stepping.
+  linear recursion ``z[n+1] = Phi_K z[n] + (S(z[n]) − Phi_K z[n])`` with per-mode IIR filters
+  (scipy.signal.lfilter; Phi_K = the closed loop plus the residual's Jacobian at the run's mean state,
+  which speeds up the contraction). The fixed point is exactly the stepped trajectory; the iteration
+  stops when the estimated remaining difference is below ``tol`` (1e-10 relative). If it does not
+  converge (limiters active for long) it falls back to stepping.
 - :class:`fcrlive.sim.realtime.RealtimeSimulator`: one step at a time.
 """
 
