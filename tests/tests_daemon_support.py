@@ -25,7 +25,7 @@ class ToySimulator:
                                pm_mw=80.0, c=0.5, a=0.5, epsilon=r)
 
 
-def fake_identify(signals, rated_mw, f0, plant=None, method="auto"):
+def fake_identify(signals, rated_mw, f0, plant=None, method="auto", **params):
     """An identification plug-in for the daemon tests: summary numbers, in the plug-in JSON shape."""
     import numpy as np
 

@@ -208,10 +208,10 @@ class IdentificationConfig(_Section):
 
     enabled: bool = True
     every_min: float = Field(5.0, gt=0, le=1440, description="period of identification runs [min]")
-    window_min: float = Field(30.0, ge=1, le=1440, description="length of the analysed window [min]")
+    window_min: float = Field(30.0, ge=0.1, le=1440, description="length of the analysed window [min]")
     method: str = "auto"
     function: str = Field(
-        "fcrlive.analysis:identify_window",
+        "fcrlive.daemon.identify_plugin:identify_window",
         pattern=r"^[A-Za-z_][\w.]*(:[A-Za-z_]\w*)?$",
         description="dotted path module:function of the identification plug-in",
     )

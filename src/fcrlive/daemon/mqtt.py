@@ -68,9 +68,9 @@ def discovery_configs(prefix: str, unit: str, discovery_prefix: str = "homeassis
         "max_abs_s": (f"{prefix}/max_abs_s", "{{ value_json.value }}", None, "Peak sensitivity max|S|"),
         "ok_fraction": (f"{prefix}/quality", "{{ (value_json.ok_fraction * 100) | round(1) }}", "%",
                         "Data quality"),
+        "max_abs_g1": (f"{prefix}/max_abs_g1", "{{ value_json.value }}", None, "Peak max|G_1|"),
         "tso_fcrn": (f"{prefix}/tso/fcrn", "{{ value_json.verdict }}", None, "FCR-N verdict"),
-        "tso_fcrd_up": (f"{prefix}/tso/fcrd_up", "{{ value_json.verdict }}", None, "FCR-D up verdict"),
-        "tso_fcrd_down": (f"{prefix}/tso/fcrd_down", "{{ value_json.verdict }}", None, "FCR-D down verdict"),
+        "tso_fcrd": (f"{prefix}/tso/fcrd", "{{ value_json.verdict }}", None, "FCR-D verdict"),
     }
     for s in live_signals:
         template = f"{{{{ value_json.signals.{s}.mean }}}}"

@@ -67,21 +67,23 @@ class ResultPayload(_Payload):
 
 
 class ScalarPayload(_Payload):
-    """``droop``, ``max_abs_s``: one estimated number with its uncertainty (retained)."""
+    """``droop``, ``max_abs_s``, ``max_abs_g1``: one estimated number with its uncertainty (retained)."""
 
     t: float = Field(description="when the estimate was made [UNIX s]")
     window_end: float = Field(description="end of the data window it is based on [UNIX s]")
     value: float | None
     std: float | None = Field(None, description="standard deviation of the estimate (same unit)")
+    ci95: list[float | None] | None = Field(None, description="95 % interval [lo, hi] (same unit)")
+    omega: float | None = Field(None, description="for peaks: ω of the maximum [rad/s]")
     unit: str = ""
 
 
 class TsoVerdictPayload(_Payload):
-    """``tso/<product>`` (fcrn, fcrd_up, fcrd_down): the Nordic TR v1.1 checks on the identified model."""
+    """``tso/<product>`` (fcrn, fcrd, fcrd_up, fcrd_down): Nordic TR v1.1 checks on the identified model."""
 
     t: float
     window_end: float
-    product: Literal["fcrn", "fcrd_up", "fcrd_down"]
+    product: Literal["fcrn", "fcrd", "fcrd_up", "fcrd_down"]
     verdict: Literal["pass", "fail", "unknown"]
     details: dict[str, Any] = Field(default_factory=dict,
                                     description="margins etc. as given by the analysis plug-in")
@@ -135,7 +137,9 @@ TOPICS: tuple[Topic, ...] = (
     Topic("result/latest", ResultPayload, True, 1, "the latest identification run, complete"),
     Topic("droop", ScalarPayload, True, 1, "estimated droop ρ [%] (key `droop` of the result)"),
     Topic("max_abs_s", ScalarPayload, True, 1, "peak sensitivity max|S| (key `max_abs_s`)"),
+    Topic("max_abs_g1", ScalarPayload, True, 1, "peak disturbance response max|G_1| (key `max_abs_g1`)"),
     Topic("tso/fcrn", TsoVerdictPayload, True, 1, "FCR-N verdict (key `tso.fcrn`)"),
+    Topic("tso/fcrd", TsoVerdictPayload, True, 1, "FCR-D verdict, both directions (key `tso.fcrd`)"),
     Topic("tso/fcrd_up", TsoVerdictPayload, True, 1, "FCR-D upwards verdict (key `tso.fcrd_up`)"),
     Topic("tso/fcrd_down", TsoVerdictPayload, True, 1, "FCR-D downwards verdict (key `tso.fcrd_down`)"),
     Topic("gp", GpPayload, True, 1, "G_p(jω) at the TSO periods (key `gp`)"),
@@ -152,27 +156,52 @@ def _num(x: Any) -> float | None:
     return f if math.isfinite(f) else None
 
 
-def _scalar(x: Any, t: float, t2: float, unit: str) -> ScalarPayload | None:
+def _scalar(x: Any, t: float, t2: float, unit: str, percent: bool = False) -> ScalarPayload | None:
+    """A number, ``{value, std, unit}`` (as given) or the report's ``{value, ci95[, omega]}`` form
+    (``percent``: a fraction shown in %, e.g. the report's droop 0.08 → 8 %)."""
     if isinstance(x, dict):
+        if "unit" not in x and "ci95" in x:  # IdentifyReport form (docs/identify.md)
+            k = 100.0 if percent else 1.0
+            ci = x.get("ci95") or [None, None]
+            lo, hi = (_num(c) for c in [*ci, None, None][:2])
+            std = (hi - lo) / (2 * 1.959964) * k if lo is not None and hi is not None else None
+            v = _num(x.get("value"))
+            return ScalarPayload(t=t, window_end=t2, value=None if v is None else v * k, std=std,
+                                 ci95=[None if lo is None else lo * k, None if hi is None else hi * k],
+                                 omega=_num(x.get("omega")), unit=unit)
         return ScalarPayload(t=t, window_end=t2, value=_num(x.get("value")), std=_num(x.get("std")),
                              unit=str(x.get("unit", unit)))
     v = _num(x)
     return None if v is None and x is None else ScalarPayload(t=t, window_end=t2, value=v, unit=unit)
 
 
+TSO_PRODUCTS = ("fcrn", "fcrd", "fcrd_up", "fcrd_down")
+
+
 def result_topics(res: ResultPayload) -> dict[str, BaseModel]:
     """Split a result into its topics: ``result/latest``, ``quality`` and, when the plug-in's JSON
-    has them, ``droop``, ``max_abs_s``, ``tso/<product>``, ``gp``. Unknown keys stay in
-    ``result/latest`` only; missing keys publish nothing (the previous retained value stays)."""
+    has them, ``droop``, ``max_abs_s``, ``max_abs_g1``, ``tso/<product>``, ``gp``. Unknown keys stay in
+    ``result/latest`` only; missing keys publish nothing (the previous retained value stays).
+
+    Both the simple form (``droop: {value, std, unit}``, ``tso: {fcrn: bool}``, ``gp: {periods_s, ...}``)
+    and the identification report of :mod:`fcrlive.analysis.report` are understood (droop as a
+    fraction with ``ci95`` → %, ``gp`` as a list of periods, ``tso: null`` when G_p was not
+    identifiable → ``unknown`` verdicts for FCR-N and FCR-D)."""
     out: dict[str, BaseModel] = {"result/latest": res, "quality": res.quality}
     r = res.result or {}
     t, t2 = res.t, res.window.end
-    if "droop" in r and (p := _scalar(r["droop"], t, t2, "%")):
+    if "droop" in r and (p := _scalar(r["droop"], t, t2, "%", percent=True)):
         out["droop"] = p
-    if "max_abs_s" in r and (p := _scalar(r["max_abs_s"], t, t2, "")):
-        out["max_abs_s"] = p
-    for product, v in (r.get("tso") or {}).items():
-        if product in ("fcrn", "fcrd_up", "fcrd_down"):
+    for key in ("max_abs_s", "max_abs_g1"):
+        if key in r and (p := _scalar(r[key], t, t2, "")):
+            out[key] = p
+    tso = r.get("tso")
+    if "tso" in r and tso is None:
+        why = next((w for w in r.get("warnings") or [] if "G_p" in w or "excitation" in w),
+                   "G_p not identifiable from this window")
+        tso = {k: {"passed": None, "reason": why} for k in ("fcrn", "fcrd")}
+    for product, v in (tso or {}).items():
+        if product in TSO_PRODUCTS:
             if isinstance(v, dict):
                 passed = v.get("passed", v.get("pass"))
                 details = {k: val for k, val in v.items() if k not in ("passed", "pass")}
@@ -186,6 +215,10 @@ def result_topics(res: ResultPayload) -> dict[str, BaseModel]:
         out["gp"] = GpPayload(t=t, window_end=t2, periods_s=[float(p) for p in gp["periods_s"]],
                               gain=[_num(g) for g in gp.get("gain", [])],
                               phase_deg=[_num(g) for g in gp.get("phase_deg", [])])
+    elif isinstance(gp, list) and gp and all(isinstance(p, dict) and "period_s" in p for p in gp):
+        out["gp"] = GpPayload(t=t, window_end=t2, periods_s=[float(p["period_s"]) for p in gp],
+                              gain=[_num(p.get("abs")) for p in gp],
+                              phase_deg=[_num(p.get("phase_deg")) for p in gp])
     return out
 
 
@@ -237,17 +270,25 @@ def render_docs() -> str:
         "",
         "| key | form | topic |",
         "|---|---|---|",
-        "| `droop` | number or `{value, std, unit}` | `droop` |",
-        "| `max_abs_s` | number or `{value, std}` | `max_abs_s` |",
-        "| `tso.fcrn`, `tso.fcrd_up`, `tso.fcrd_down` | bool or `{passed, ...details}` | `tso/<product>` |",
-        "| `gp` | `{periods_s: [...], gain: [...], phase_deg: [...]}` | `gp` |",
+        "| `droop` | number, `{value, std, unit}`, or the report's `{value, ci95}` (a fraction, shown in %)"
+        " | `droop` |",
+        "| `max_abs_s`, `max_abs_g1` | number, `{value, std}` or `{value, omega, ci95}` | same name |",
+        "| `tso.fcrn`, `tso.fcrd`, `tso.fcrd_up`, `tso.fcrd_down` | bool or `{passed, ...details}`"
+        " (`pass` also accepted) | `tso/<product>` |",
+        "| `tso` = `null` (no excitation: G_p not identifiable) | | `tso/fcrn`, `tso/fcrd` with verdict"
+        " `unknown` |",
+        "| `gp` | `{periods_s, gain, phase_deg}` or the report's list of `{period_s, abs, phase_deg, ...}`"
+        " | `gp` |",
+        "",
+        "The default plug-in (`fcrlive.daemon.identify_plugin:identify_window`) returns the identification",
+        "report of `fcrlive identify --json` (docs/identify.md) plus `sample_interval_s` and `segments`.",
         "",
         "## Home Assistant discovery",
         "",
         "With `[mqtt] homeassistant_discovery = true` the daemon publishes retained sensor configs to",
-        "`<discovery_prefix>/sensor/fcrlive_<unit>_<key>/config` (droop, max_abs_s, data quality, live",
-        "power and frequency, FCR-N/FCR-D verdicts), with `availability_topic` = the status topic, and",
-        "announces them again whenever `<discovery_prefix>/status` says `online` (Home Assistant",
+        "`<discovery_prefix>/sensor/fcrlive_<unit>_<key>/config` (droop, max_abs_s, max_abs_g1, data",
+        "quality, live power and frequency, FCR-N/FCR-D verdicts), with `availability_topic` = the status",
+        "topic, and announces them again whenever `<discovery_prefix>/status` says `online` (Home Assistant",
         "restarted).",
         "",
         "## JSON Schemas",

@@ -133,7 +133,7 @@ class Service:
             t0 = time.monotonic()
             try:
                 result, _ = await worker.run(window_signals(w), self.cfg.unit.rated_mw, self.cfg.unit.f0,
-                                             plant=plant, method=ic.method)
+                                             plant=plant, method=ic.method, kd=self.cfg.unit.kd)
                 self.metrics.ident_runs.labels("ok").inc()
             except Exception as exc:  # the plug-in's failure is data for the user, not a daemon crash
                 error = f"{type(exc).__name__}: {exc}"

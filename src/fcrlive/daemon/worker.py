@@ -6,14 +6,16 @@ OpenBLAS on 2 cores made a least-squares fit 35× slower, libraries.md) and pre-
 
 Plug-in contract (``[identification] function = "module:function"``)::
 
-    def identify_window(signals, rated_mw, f0, plant=None, method="auto") -> result
+    def identify_window(signals, rated_mw, f0, plant=None, method="auto", kd=0.0, **params) -> result
 
 ``signals`` is a dict of 1-D float64 numpy arrays of equal length: ``t`` [UNIX s], ``ok`` (1.0 for
 quality-OK samples, else 0.0) and one array per stored signal in its unit (``power`` [MW],
 ``grid_freq`` [Hz], ``excitation_applied`` [Hz], ...; NaN where unavailable). ``plant`` is the path of
-the plant description file or None. The result may be an object with ``to_json()`` (returning a
-dict or a JSON string), a dict, or a JSON string; the worker returns it as a dict, which is stored
-in SQLite and published on MQTT.
+the plant description file or None, ``kd`` the load damping of ``[unit]``; a plug-in should accept
+(and may ignore) further keyword parameters. The default plug-in is
+:func:`fcrlive.daemon.identify_plugin.identify_window`. The result may be an object with
+``to_json()`` (returning a dict or a JSON string), a dict, or a JSON string; the worker returns it
+as a dict, which is stored in SQLite and published on MQTT.
 """
 
 from __future__ import annotations
@@ -73,11 +75,11 @@ def _json_default(o: Any) -> Any:
 
 
 def run_job(func: str | Callable, signals: dict[str, np.ndarray], rated_mw: float, f0: float,
-            plant: str | None, method: str) -> tuple[dict, float]:
+            plant: str | None, method: str, params: dict | None = None) -> tuple[dict, float]:
     """Executed in the worker: call the plug-in, return ``(result dict, CPU wall time [s])``."""
     fn = resolve(func) if isinstance(func, str) else func
     t0 = time.perf_counter()
-    res = fn(signals, rated_mw, f0, plant=plant, method=method)
+    res = fn(signals, rated_mw, f0, plant=plant, method=method, **(params or {}))
     out = _to_dict(res)
     return out, time.perf_counter() - t0
 
@@ -115,10 +117,12 @@ class IdentificationWorker:
             self._pool = None
 
     async def run(self, signals: dict[str, np.ndarray], rated_mw: float, f0: float,
-                  plant: str | None = None, method: str = "auto") -> tuple[dict, float]:
-        """Run one identification; ``(result dict, duration [s])``. Exceptions of the plug-in propagate."""
+                  plant: str | None = None, method: str = "auto", **params) -> tuple[dict, float]:
+        """Run one identification; ``(result dict, duration [s])``. Exceptions of the plug-in propagate.
+        ``params`` (e.g. ``kd``) are passed to the plug-in as keyword arguments."""
         loop = asyncio.get_running_loop()
-        fut = loop.run_in_executor(self._pool, run_job, self.func, signals, rated_mw, f0, plant, method)
+        fut = loop.run_in_executor(self._pool, run_job, self.func, signals, rated_mw, f0, plant, method,
+                                   params)
         try:
             return await asyncio.wait_for(fut, self.timeout_s)
         except TimeoutError:

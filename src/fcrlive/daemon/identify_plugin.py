@@ -1,0 +1,166 @@
+"""The daemon's default identification plug-in: a stored window → PlantSignals → identify → report JSON.
+
+``[identification] function = "fcrlive.daemon.identify_plugin:identify_window"`` (the default). Runs in
+the worker process (:mod:`fcrlive.daemon.worker`), so it may take seconds of CPU.
+
+From the window arrays (see the worker's plug-in contract) to the paper's signals, in pu:
+
+- time axis: the device's own clock ``device_time`` [s] when the map has it and it is finite on the
+  good samples (an accelerated simulator runs faster than the wall clock; a real governor's clock has no
+  arrival jitter), else the arrival time ``t``;
+- ``u = (power − mean power)/rated_mw``;
+- ``y``, the frequency deviation the governor acts on [pu of f0], from the best signal available:
+  ``control_error`` (the governor's own ε, so y = r − ε), else ``speed`` (pu, 1 = nominal), else
+  ``grid_freq``; which one was used is written into the report's ``notes``;
+- ``r = excitation_applied/f0`` (zeros when the map has no such point), ``epsilon = r − y``;
+- ``c = controller_output/100``, ``a = guide_vane/100`` when present (% of full opening).
+
+Only quality-OK samples with finite values are used. They are put on a uniform grid with the median
+sample interval by linear interpolation between neighbouring good samples; wherever two good samples are
+more than ``MAX_GAP`` (2.5) intervals apart (bad samples, daemon down, device restart: its clock jumps
+back) the data is split into separate segments, and segments shorter than ``MIN_SEGMENT`` grid points are
+dropped, so no filter of the identification runs across a gap.
+
+Accuracy depends on the sample interval in the device's time: Z_u (no excitation) needs ~0.1-0.2 s. A
+simulator accelerated 60× and polled at 50 Hz gives 1.2 s and unusable droop estimates (docs/daemon.md).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+MIN_SEGMENT = 50
+MAX_GAP = 2.5
+"""Good samples further apart than this many median intervals start a new segment."""
+"""Shortest segment kept [grid points]."""
+EXCITATION_THRESHOLD_HZ = 1e-3
+"""Peak-to-peak of excitation_applied above which the window counts as excited [Hz]."""
+
+
+def _finite(signals: dict[str, np.ndarray], name: str, ok: np.ndarray) -> bool:
+    v = signals.get(name)
+    return v is not None and bool(np.all(np.isfinite(v[ok])))
+
+
+def window_to_plant_signals(signals: dict[str, np.ndarray], rated_mw: float, f0: float = 50.0):
+    """The :class:`fcrlive.tso.signals.PlantSignals` of a window (module docstring); DataError when the
+    window has no usable data."""
+    from fcrlive.errors import DataError
+    from fcrlive.tso.signals import PlantSignals
+
+    sig = {k: np.asarray(v, dtype=np.float64) for k, v in signals.items()}
+    if "power" not in sig:
+        raise DataError("the register map has no 'power' point: cannot identify")
+    notes: list[str] = []
+    if "control_error" in sig:
+        yname = "control_error"
+    elif "speed" in sig:
+        yname = "speed"
+    elif "grid_freq" in sig:
+        yname = "grid_freq"
+    else:
+        raise DataError("the register map has none of control_error, speed, grid_freq: cannot identify")
+    needed = ["power", yname] + [n for n in ("excitation_applied", "controller_output", "guide_vane")
+                                 if n in sig]
+    ok = sig["ok"] > 0
+    for n in needed:
+        ok &= np.isfinite(sig[n])
+    n_ok = int(np.count_nonzero(ok))
+    if n_ok < MIN_SEGMENT:
+        raise DataError(f"only {n_ok} good samples in the window")
+    use_device = _finite(sig, "device_time", ok)
+    tt = sig["device_time"] if use_device else sig["t"]
+    notes.append("time axis: device_time (the device's clock)" if use_device else
+                 "time axis: arrival time (no device_time)")
+    idx = np.flatnonzero(ok)
+    t = tt[idx]
+    # a device restart sets its clock back: keep the order of arrival, split where time does not advance
+    dt = np.diff(t)
+    pos = dt[dt > 0]
+    if pos.size == 0:
+        raise DataError("sample times do not advance")
+    Ts = float(np.median(pos))
+    breaks = np.flatnonzero((dt <= 0) | (dt > MAX_GAP * Ts)) + 1
+    pieces = np.split(np.arange(idx.size), breaks)
+
+    def col(name: str) -> np.ndarray:
+        return sig[name][idx]
+
+    raw = {"power": col("power"), "y": col(yname)}
+    exc = col("excitation_applied") if "excitation_applied" in sig else np.zeros(idx.size)
+    raw["exc"] = exc
+    for n in ("controller_output", "guide_vane"):
+        if n in sig:
+            raw[n] = col(n)
+    out: dict[str, list[np.ndarray]] = {k: [] for k in raw}
+    tgrid: list[np.ndarray] = []
+    segments: list[tuple[int, int]] = []
+    n_total = 0
+    t_offset = 0.0
+    for p in pieces:
+        if p.size < 2:
+            continue
+        tp = t[p]
+        n = math.floor((tp[-1] - tp[0]) / Ts + 1e-9) + 1
+        if n < MIN_SEGMENT:
+            continue
+        g = tp[0] + Ts * np.arange(n)
+        for k, v in raw.items():
+            out[k].append(np.interp(g, tp, v[p]))
+        tgrid.append(g - g[0] + t_offset)
+        t_offset += n * Ts + 1000.0 * Ts  # segments apart on the time axis
+        segments.append((n_total, n_total + n))
+        n_total += n
+    if not segments:
+        raise DataError(f"no gap-free stretch of at least {MIN_SEGMENT} samples in the window")
+    cat = {k: np.concatenate(v) for k, v in out.items()}
+    p_mw = cat["power"]
+    p0 = float(np.mean(p_mw))
+    u = (p_mw - p0) / rated_mw
+    r = cat["exc"] / f0
+    if yname == "control_error":
+        y = r - cat["y"]
+        notes.append("y = r − control_error (the governor's own control error)")
+    elif yname == "speed":
+        y = cat["y"] - 1.0
+        notes.append("y = speed − 1 (no control_error point)")
+    else:
+        y = (cat["y"] - f0) / f0
+        notes.append("y = (grid_freq − f0)/f0 (no control_error or speed point)")
+    has_exc = bool(np.ptp(cat["exc"]) > EXCITATION_THRESHOLD_HZ)
+    if len(segments) > 1:
+        notes.append(f"window split into {len(segments)} gap-free segments")
+    return PlantSignals(
+        t=np.concatenate(tgrid), Ts=Ts, u=u, y=y, r=r, epsilon=r - y,
+        c=cat["controller_output"] / 100.0 if "controller_output" in cat else None,
+        a=cat["guide_vane"] / 100.0 if "guide_vane" in cat else None,
+        rated_mw=float(rated_mw), f0=float(f0), p0_mw=p0, has_excitation=has_exc,
+        filled=np.zeros(n_total, dtype=bool), segments=tuple(segments), sources=("fcrlive daemon window",),
+        notes=tuple(notes),
+    )
+
+
+def identify_window(signals: dict[str, np.ndarray], rated_mw: float, f0: float = 50.0,
+                    plant: str | None = None, method: str = "auto", kd: float = 0.0, **_params: Any) -> dict:
+    """The plug-in: identify the window and return the report as JSON (``IdentifyReport.to_json_dict``).
+
+    ``plant`` is the path of a plant description file (its controller is used by ``zcu``) or None.
+    Extra keyword parameters from newer daemons are accepted and ignored.
+    """
+    from fcrlive.analysis.identify import identify_signals
+
+    ps = window_to_plant_signals(signals, rated_mw, f0)
+    plant_obj = None
+    if plant:
+        from fcrlive.plant.description import load_plant
+
+        plant_obj = load_plant(plant)
+    rep = identify_signals(ps, rated_mw=rated_mw, f0=f0, kd=kd, plant=plant_obj, method=method)
+    out = rep.to_json_dict()
+    out["notes"] = list(ps.notes) + list(out.get("notes") or [])
+    out["sample_interval_s"] = ps.Ts
+    out["segments"] = len(ps.segments)
+    return out
