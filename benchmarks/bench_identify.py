@@ -1,7 +1,10 @@
 """identify: time of a full re-identification of a 30-min window at 10 Hz (every applicable method +
 assessment, one core) and accuracy vs the analytic truth per method on a few seeds (50 Hz logs).
 
-``python -m benchmarks identify [--seeds N] [--repeat R]``
+``python -m benchmarks identify [--seeds N] [--repeat R] [--coverage M]``
+
+``--coverage M``: over M seeds, how often each 95 % interval holds the truth (nominal 0.95), per method,
+with the mean error and its seed-to-seed sd.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="bench_identify")
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--coverage", type=int, default=20)
     args = ap.parse_args(argv or [])
     from threadpoolctl import threadpool_limits
 
@@ -90,6 +94,50 @@ def main(argv: list[str] | None = None) -> None:
                     err = 100 * (v.value / true[name] - 1)
                     parts.append(f"{name} {v.value:.4f} ({err:+.1f} %){inside}")
                 print(f"  seed {seed} {m}{' (15 min, no r)' if m == 'zu' else ''}: " + ", ".join(parts))
+
+
+        if args.coverage:
+            coverage(args.coverage, true, kd)
+
+
+def coverage(n_seeds: int, true: dict, kd: float, methods=("zcu", "zur", "zu")) -> dict:
+    """Empirical coverage of the 95 % intervals over seeds 1000.. (30 min excited / 15 min quiet, 12 dB)."""
+    from fcrlive.analysis.identify import identify_signals
+
+    keys = (("droop", "droop"), ("max_abs_g1", "max_g1"), ("max_abs_s", "max_s"))
+    hits = {m: {k: [] for _, k in keys} for m in methods}
+    errs = {m: {k: [] for _, k in keys} for m in methods}
+    for seed in range(1000, 1000 + n_seeds):
+        exc = _signals(seed, True, 1800.0, None)
+        quiet = _signals(seed, False, 900.0, None) if "zu" in methods else None
+        cases = {"zcu": exc, "zur": replace(exc, c=None, a=None), "zu": quiet}
+        for m in methods:
+            try:
+                r = identify_signals(cases[m], rated_mw=300.0, kd=kd, method=m)
+            except Exception:
+                for _, k in keys:
+                    hits[m][k].append(False)
+                continue
+            for attr, k in keys:
+                v = getattr(r, attr)
+                if v is None or v.value is None:
+                    if m != "zu" or k == "max_g1" or k == "droop":
+                        hits[m][k].append(False)
+                    continue
+                lo, hi = v.ci95
+                hits[m][k].append(bool(lo is not None and hi is not None and lo <= true[k] <= hi))
+                errs[m][k].append(100 * (v.value / true[k] - 1))
+    print(f"\ncoverage of the 95 % intervals over {n_seeds} seeds (nominal 0.95); error mean ± sd [%]")
+    for m in methods:
+        parts = []
+        for _, k in keys:
+            if not hits[m][k]:
+                continue
+            e = np.asarray(errs[m][k])
+            err = f"{e.mean():+.2f} ± {e.std():.2f}" if e.size else "n/a"
+            parts.append(f"{k} {np.mean(hits[m][k]):.2f} ({err})")
+        print(f"  {m}: " + ", ".join(parts))
+    return hits
 
 
 if __name__ == "__main__":
