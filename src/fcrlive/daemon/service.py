@@ -107,6 +107,17 @@ class Service:
                      payload.samples, payload.rate_hz, payload.quality["ok"], payload.quality["comm_error"],
                      payload.missed_ticks, self.writer.committed)
 
+    async def _report_unreachable(self) -> None:
+        """Say once, clearly, when the device cannot be reached at start (the source keeps retrying)."""
+        from fcrlive.daemon.reach import probe_tcp
+
+        m = self.cfg.source.modbus
+        why = await probe_tcp(m.host, m.port, timeout=3.0)
+        if why is not None and not self.source.stats.connected:
+            log.warning("cannot reach %s:%d (%s); retrying with backoff up to %g s", m.host, m.port, why,
+                        m.backoff_max_s)
+        await asyncio.Event().wait()  # stays in the task list without ending it
+
     async def _watchdog(self, interval: float) -> None:
         while True:
             await asyncio.sleep(interval)
@@ -184,14 +195,25 @@ class Service:
 
     async def run(self, stop: asyncio.Event) -> None:
         """Run until ``stop`` is set."""
+        import sqlite3
+
+        from fcrlive.errors import ConfigError
+
         cfg = self.cfg
         if cfg.metrics.enabled:
-            self.metrics.serve(cfg.metrics.host, cfg.metrics.port)
+            try:
+                self.metrics.serve(cfg.metrics.host, cfg.metrics.port)
+            except OSError as exc:
+                raise ConfigError(f"cannot listen on {cfg.metrics.host}:{cfg.metrics.port} "
+                                  f"({(exc.strerror or str(exc)).lower()})", where="metrics") from None
         self.writer = SampleWriter(cfg.store.path, self.signals, cfg.store.commit_interval_s,
                                    cfg.store.retention_hours, version=self.version,
                                    info={"unit": cfg.unit.name, "source": cfg.source.kind,
                                          "poll_hz": poll_hz(cfg), "signals": list(self.signals)})
-        await asyncio.to_thread(self.writer.open)
+        try:
+            await asyncio.to_thread(self.writer.open)
+        except (OSError, sqlite3.Error) as exc:
+            raise ConfigError(f"cannot open the store {cfg.store.path} ({exc})", where="store.path") from None
         live = LiveStats(time.time(), self.signals)
         async with contextlib.AsyncExitStack() as stack:
             if cfg.mqtt.enabled:
@@ -214,6 +236,8 @@ class Service:
             sd_notify("READY=1")
             log.info("running unit=%s source=%s signals=%d store=%s", cfg.unit.name, cfg.source.kind,
                      len(self.signals), cfg.store.path)
+            if cfg.source.kind == "modbus":
+                tasks.append(asyncio.create_task(self._report_unreachable(), name="reach"))
             stopper = asyncio.create_task(stop.wait())
             done, _ = await asyncio.wait([stopper, *tasks], return_when=asyncio.FIRST_COMPLETED)
             sd_notify("STOPPING=1")
