@@ -34,6 +34,7 @@ from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, Settings
 
 from fcrlive.daemon.registers import TYPE_WORDS, RegisterMap, RegisterPoint, find_overlap
 from fcrlive.errors import ConfigError
+from fcrlive.excitation.config import ExcitationSettings as ExcitationConfig
 
 ENV_PREFIX = "FCRLIVE_"
 ENV_DELIMITER = "__"
@@ -277,12 +278,8 @@ class MetricsConfig(_Section):
     port: int = Field(9108, ge=0, le=65535)
 
 
-class ExcitationConfig(_Section):
-    """Placeholder for the excitation issue: accepted and validated, not used yet."""
-
-    enabled: bool = False
-    amplitude_hz: float = Field(0.0, ge=0, le=0.1, description="excitation amplitude [Hz]")
-    kind: Literal["prbs", "white", "sine", "multisine"] = "prbs"
+WRITTEN_SIGNAL = "excitation_written"
+"""Store column (and plug-in signal) of the excitation r actually written [Hz] (with [excitation] on)."""
 
 
 class _FileSource(PydanticBaseSettingsSource):
@@ -315,11 +312,19 @@ class FcrliveConfig(BaseSettings):
                                    file_secret_settings):
         return init_settings, env_settings, _FileSource(settings_cls)
 
+    @model_validator(mode="after")
+    def _check_excitation(self) -> FcrliveConfig:
+        if self.excitation.enabled and self.source.kind != "modbus":
+            raise ValueError("excitation: writing needs source.kind = 'modbus'")
+        return self
+
     @property
     def signals(self) -> tuple[str, ...]:
-        """Names of the sampled signals (register points or DBC signals)."""
+        """Names of the sampled signals (register points or DBC signals; plus ``excitation_written``
+        when the excitation is enabled)."""
         if self.source.kind == "modbus":  # measurements: the input registers (see ModbusParams)
-            return tuple(p.name for p in self.source.modbus.load_map().points if p.table == "input")
+            names = tuple(p.name for p in self.source.modbus.load_map().points if p.table == "input")
+            return (*names, WRITTEN_SIGNAL) if self.excitation.enabled else names
         from fcrlive.daemon.can_source import dbc_signal_names
 
         return dbc_signal_names(self.source.can.dbc)

@@ -12,7 +12,9 @@ From the window arrays (see the worker's plug-in contract) to the paper's signal
 - ``y``, the frequency deviation the governor acts on [pu of f0], from the best signal available:
   ``control_error`` (the governor's own ε, so y = r − ε), else ``speed`` (pu, 1 = nominal), else
   ``grid_freq``; which one was used is written into the report's ``notes``;
-- ``r = excitation_applied/f0`` (zeros when the map has no such point), ``epsilon = r − y``;
+- ``r`` [pu of f0]: ``excitation_written/f0`` (the value the daemon's excitation task wrote, stored with
+  each sample) when present, else ``excitation_applied/f0`` (what the device reports applying), else
+  zeros; ``epsilon = r − y``;
 - ``c = controller_output/100``, ``a = guide_vane/100`` when present (% of full opening).
 
 Only quality-OK samples with finite values are used. They are put on a uniform grid with the median
@@ -63,8 +65,10 @@ def window_to_plant_signals(signals: dict[str, np.ndarray], rated_mw: float, f0:
         yname = "grid_freq"
     else:
         raise DataError("the register map has none of control_error, speed, grid_freq: cannot identify")
-    needed = ["power", yname] + [n for n in ("excitation_applied", "controller_output", "guide_vane")
-                                 if n in sig]
+    rname = next((n for n in ("excitation_written", "excitation_applied") if n in sig), None)
+    if rname == "excitation_written" and not np.any(np.isfinite(sig[rname]) & (sig["ok"] > 0)):
+        rname = "excitation_applied" if "excitation_applied" in sig else None
+    needed = ["power", yname] + [n for n in (rname, "controller_output", "guide_vane") if n and n in sig]
     ok = sig["ok"] > 0
     for n in needed:
         ok &= np.isfinite(sig[n])
@@ -90,7 +94,7 @@ def window_to_plant_signals(signals: dict[str, np.ndarray], rated_mw: float, f0:
         return sig[name][idx]
 
     raw = {"power": col("power"), "y": col(yname)}
-    exc = col("excitation_applied") if "excitation_applied" in sig else np.zeros(idx.size)
+    exc = col(rname) if rname else np.zeros(idx.size)
     raw["exc"] = exc
     for n in ("controller_output", "guide_vane"):
         if n in sig:
@@ -131,6 +135,8 @@ def window_to_plant_signals(signals: dict[str, np.ndarray], rated_mw: float, f0:
         y = (cat["y"] - f0) / f0
         notes.append("y = (grid_freq − f0)/f0 (no control_error or speed point)")
     has_exc = bool(np.ptp(cat["exc"]) > EXCITATION_THRESHOLD_HZ)
+    if has_exc:
+        notes.append(f"r from {rname}")
     if len(segments) > 1:
         notes.append(f"window split into {len(segments)} gap-free segments")
     return PlantSignals(

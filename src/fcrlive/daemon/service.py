@@ -73,11 +73,21 @@ class Service:
         self.source: Any = None
         self.writer: SampleWriter | None = None
         self.publisher: Any = None
+        self.excitation: Any = None
+        self.written_hz = 0.0
+        """The excitation value last written to the device [Hz] (NaN when a write failed)."""
 
     # -- tasks ------------------------------------------------------------------------------------
 
     async def _sampler(self, live: LiveStats) -> None:
+        from dataclasses import replace
+
+        from fcrlive.daemon.config import WRITTEN_SIGNAL
+
+        with_r = self.excitation is not None
         async for s in self.source.samples():
+            if with_r:  # the r actually written, stored with the sample it was in force for
+                s = replace(s, values={**s.values, WRITTEN_SIGNAL: self.written_hz})
             self.writer.add(s)
             self.metrics.observe_sample(s)
             live.add(s)
@@ -106,6 +116,13 @@ class Service:
             log.info("stats samples=%d rate_hz=%.2f ok=%d comm_error=%d missed=%d committed=%d",
                      payload.samples, payload.rate_hz, payload.quality["ok"], payload.quality["comm_error"],
                      payload.missed_ticks, self.writer.committed)
+
+    def _on_written(self, w) -> None:
+        self.written_hz = float("nan") if w.written_hz is None else float(w.written_hz)
+
+    async def _excite(self) -> None:
+        await self.excitation.run()
+        await asyncio.Event().wait()  # stopped on purpose (budget, stop()): keep sampling
 
     async def _report_unreachable(self) -> None:
         """Say once, clearly, when the device cannot be reached at start (the source keeps retrying)."""
@@ -223,8 +240,19 @@ class Service:
                 self.publisher = await stack.enter_async_context(
                     MqttPublisher(cfg.mqtt, cfg.unit.name, live_signals=live_signals))
             self.source = await stack.enter_async_context(make_source(cfg))
+            if cfg.excitation.enabled:
+                from fcrlive.daemon.modbus_source import ModbusParams
+
+                # entered after the source: left before it, with a verified zero written on the way out
+                task = cfg.excitation.make_task(ModbusParams.from_config(cfg.source.modbus), f0=cfg.unit.f0,
+                                                on_written=self._on_written)
+                self.excitation = await stack.enter_async_context(task)
+                log.warning("excitation ON: writing %s r[n] every %g s through the safety guard",
+                            cfg.excitation.generator.kind, cfg.excitation.period_s)
             tasks = [asyncio.create_task(self._sampler(live), name="sampler"),
                      asyncio.create_task(self._stats(live), name="stats")]
+            if self.excitation is not None:
+                tasks.append(asyncio.create_task(self._excite(), name="excitation"))
             if (interval := watchdog_interval_s()) is not None:
                 tasks.append(asyncio.create_task(self._watchdog(interval), name="sd-watchdog"))
             if cfg.identification.enabled:
