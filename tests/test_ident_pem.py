@@ -139,3 +139,39 @@ def test_zero_delay_and_fir_part():
     np.testing.assert_allclose(m.theta, [0.8, -0.3], atol=5 * m.sd.max())
     y0 = sps.lfilter(m.b[0], m.f[0], d.u[:, 0])
     np.testing.assert_allclose(m.simulate(d), y0)
+
+
+def _slow_not_at_rest(noise_std=0.0, seed=3):
+    import scipy.signal as sps
+
+    from fcrlive.ident import IdData
+
+    rng = np.random.default_rng(seed)
+    n = 6000
+    u = np.cumsum(rng.standard_normal(n)) * 0.05 + rng.standard_normal(n)
+    y = sps.lfilter([0.0, 0.02], [1.0, -0.995], u) + noise_std * rng.standard_normal(n)
+    k = n // 2  # the record starts in the middle: far from rest, pole τ = 200 samples
+    return IdData(y[k:], u[k:, None], Ts=1.0).detrend("mean")
+
+
+def test_oe_initial_state_estimated():
+    from fcrlive.ident import oe
+
+    d = _slow_not_at_rest(noise_std=1e-4)
+    m = oe(d, 1, 1, 1, ic="estimate")
+    assert m.f[0][1] == pytest.approx(-0.995, abs=1e-4)
+    assert m.static_gain(0)[0] == pytest.approx(0.02 / 0.005, rel=1e-2)
+    # from rest, the free response of the slow pole biases the fit
+    z = oe(d, 1, 1, 1)
+    assert abs(z.static_gain(0)[0] / 4.0 - 1) > 10 * abs(m.static_gain(0)[0] / 4.0 - 1)
+
+
+def test_oe_sandwich_matches_gauss_with_white_noise():
+    from fcrlive.ident import oe
+
+    d = _slow_not_at_rest(noise_std=0.5)
+    g = oe(d, 1, 1, 1, ic="estimate")
+    s = oe(d, 1, 1, 1, ic="estimate", covariance="sandwich")
+    np.testing.assert_allclose(s.theta, g.theta)
+    ratio = np.sqrt(np.diag(s.covariance) / np.diag(g.covariance))
+    assert np.all((ratio > 0.6) & (ratio < 1.6))

@@ -10,6 +10,8 @@ Usage guide (numpy in, frozen dataclasses out; ω always in rad/s, evaluated at 
 
     m = arx(data, na=20, nb=20, nk=0)            # MISO least squares (QR), Cov = λ̂(RᵀR)⁻¹
     m = bj(data, nb=2, nc=1, nd=1, nf=2, nk=1)   # prediction error, Gauss-Newton + LM, multi-start
+    m = oe(data, 2, 2, 1, ic="estimate",          # initial states + offset estimated (slow poles,
+           covariance="sandwich")                 # records not at rest); Newey-West covariance
     m.theta, m.sd, m.report                      # parameters [a, b, c, d, f], sd, how it converged
 
     G1 = m.freqresp(omega, input="u")            # FreqResp: value, sd_abs, sd_phase, ci95_abs()
