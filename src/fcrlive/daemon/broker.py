@@ -59,7 +59,8 @@ class EmbeddedBroker:
         """Start (again) on the same port."""
         from amqtt.broker import Broker
 
-        logging.getLogger("amqtt").setLevel(logging.WARNING)
+        # CRITICAL: amqtt logs an ERROR for every TCP probe (wait_listening) that sends no CONNECT
+        logging.getLogger("amqtt").setLevel(logging.CRITICAL)
         cfg = {
             "listeners": {"default": {"type": "tcp", "bind": f"{self.host}:{self.port}"}},
             "plugins": {"amqtt.plugins.authentication.AnonymousAuthPlugin": {"allow_anonymous": True}},

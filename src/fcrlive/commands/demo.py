@@ -1,0 +1,255 @@
+"""``fcrlive demo``: the whole system on embedded defaults, results shown live as they arrive over MQTT.
+
+Starts, in this process, the simulated governor (``sim_device.SimGovernor``, paper plant 1, accelerated
+``--speed`` times), an embedded MQTT broker (amqtt; ``--broker mosquitto`` for a private Mosquitto, or
+``--mqtt-host`` to use a running broker) and the daemon itself (``Service``: Modbus polling, a temporary
+SQLite store, identification in a worker process, MQTT publishing). A subscriber prints every result, and
+after ``--identifications`` results a summary against the simulated plant's truth.
+
+Window lengths are given in SIMULATED minutes; the daemon's wall-clock windows are these divided by the
+speed. The identification's accuracy depends on the simulated time between two samples,
+``speed/poll_hz`` (0.2 s by default): Z_u (no excitation) needs 0.1-0.2 s (docs/daemon.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+NAME = "demo"
+HELP = ("run the whole system on embedded defaults (simulated governor, MQTT broker, daemon); "
+        "show results live")
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--speed", type=float, default=10.0,
+                        help="simulated seconds per wall second (default 10)")
+    parser.add_argument("--poll-hz", type=float, default=50.0,
+                        help="daemon polling rate, 10-50 Hz (default 50)")
+    parser.add_argument("--window-min", type=float, default=15.0,
+                        help="identification window [simulated min] (default 15)")
+    parser.add_argument("--every-min", type=float, default=5.0,
+                        help="identification period [simulated min] (default 5)")
+    parser.add_argument("--identifications", type=int, default=3,
+                        help="stop after this many identification results (default 3)")
+    parser.add_argument("--minutes", type=float, default=None,
+                        help="stop after this many WALL minutes at the latest (default: enough for the "
+                             "identifications)")
+    parser.add_argument("--excitation", action="store_true",
+                        help="write the paper's white-noise excitation (0.1 Hz) through the safety guard")
+    parser.add_argument("--broker", choices=("embedded", "mosquitto", "auto"), default="embedded",
+                        help="MQTT broker to start: embedded amqtt (default), a private mosquitto, or auto")
+    parser.add_argument("--mqtt-host", default=None, help="use this running broker instead of starting one")
+    parser.add_argument("--mqtt-port", type=int, default=1883, help="port of --mqtt-host (default 1883)")
+    parser.add_argument("--seed", type=int, default=1, help="noise seed of the simulated grid (default 1)")
+    parser.add_argument("--store", default=None, metavar="FILE.sqlite",
+                        help="keep the SQLite store here (default: a temporary file)")
+    parser.add_argument("--log-level", default="WARNING", choices=("DEBUG", "INFO", "WARNING", "ERROR"),
+                        help="daemon log level on stderr (default WARNING)")
+
+
+def _check(args) -> None:
+    from fcrlive.errors import UserError
+
+    if not (args.speed > 0 and args.speed <= 200):
+        raise UserError(f"--speed must be in (0, 200], not {args.speed:g}")
+    if not 10 <= args.poll_hz <= 50:
+        raise UserError(f"--poll-hz must be between 10 and 50, not {args.poll_hz:g}")
+    if args.identifications < 1:
+        raise UserError("--identifications must be at least 1")
+    if args.window_min / args.speed < 0.1:
+        raise UserError(f"--window-min {args.window_min:g} at --speed {args.speed:g} is shorter than the "
+                        "daemon's smallest window (0.1 wall minutes)")
+    if args.every_min <= 0 or (args.minutes is not None and args.minutes <= 0):
+        raise UserError("--every-min and --minutes must be positive")
+
+
+def _fmt_ci(d: dict | None, scale: float = 1.0, fmt: str = "{:.2f}") -> str:
+    if not d or d.get("value") is None:
+        return "n/a"
+    s = fmt.format(d["value"] * scale)
+    lo, hi = (d.get("ci95") or [None, None])[:2]
+    if lo is not None and hi is not None:
+        s += f" [{fmt.format(lo * scale)}, {fmt.format(hi * scale)}]"
+    return s
+
+
+def _verdict(tso: dict | None, key: str) -> str:
+    if not tso or key not in tso:
+        return "unknown"
+    return "PASS" if tso[key].get("pass", tso[key].get("passed")) else "FAIL"
+
+
+def result_line(n: int, msg: dict, speed: float) -> str:
+    """One terminal line for a ``result/latest`` payload."""
+    q = msg["quality"]
+    w = msg["window"]
+    head = (f"#{n} {(w['end'] - w['start']) * speed / 60:.1f} sim-min window, data ok "
+            f"{100 * q['ok_fraction']:.1f} % ({q['gaps']} gaps)")
+    if not msg["ok"]:
+        return f"{head}: no result: {msg['error']}"
+    r = msg["result"] or {}
+    return (f"{head}, method {r.get('method')}: droop {_fmt_ci(r.get('droop'), 100.0)} %, "
+            f"max|S| {_fmt_ci(r.get('max_abs_s'))}, max|G_1| {_fmt_ci(r.get('max_abs_g1'))}, "
+            f"FCR-N {_verdict(r.get('tso'), 'fcrn')}, FCR-D {_verdict(r.get('tso'), 'fcrd')} "
+            f"({msg['duration_s']:.1f} s)")
+
+
+def summary_lines(results: list[dict], truth: dict, kd: float, wall_s: float, speed: float) -> list[str]:
+    """The closing summary against the simulated plant's truth."""
+    ok = [m["result"] for m in results if m["ok"] and m["result"]]
+    droop_true = 1.0 / (1.0 / truth["g1_static"] - kd) if truth.get("g1_static") else truth.get("droop")
+    lines = [f"demo summary: {len(results)} identification(s), {len(ok)} with a result, in {wall_s:.0f} s "
+             f"wall ({wall_s * speed / 60:.0f} simulated min at speed {speed:g})"]
+
+    def row(name: str, true: float | None, key: str, scale: float, unit: str) -> str:
+        vals = [r[key]["value"] * scale for r in ok if r.get(key) and r[key].get("value") is not None]
+        t = "?" if true is None else f"{true * scale:.3g}{unit}"
+        if not vals:
+            return f"  {name:<9} truth {t:<8} estimates: none (not identifiable from this data)"
+        mean = sum(vals) / len(vals)
+        err = "" if true is None else f", error of the mean {mean - true * scale:+.2f}{unit}"
+        return (f"  {name:<9} truth {t:<8} estimates {', '.join(f'{v:.3g}' for v in vals)}{unit}"
+                f" (mean {mean:.3g}{unit}{err})")
+
+    lines.append(row("droop", droop_true, "droop", 100.0, " %"))
+    lines.append(row("max|S|", truth.get("max_S"), "max_abs_s", 1.0, ""))
+    lines.append(row("max|G_1|", truth.get("max_G1"), "max_abs_g1", 1.0, ""))
+    methods = sorted({r.get("method") for r in ok})
+    if methods:
+        lines.append(f"  method(s): {', '.join(str(m) for m in methods)}"
+                     + ("; without excitation S, G_p and the TSO checks are not identifiable (Z_u)"
+                        if methods == ["zu"] else ""))
+    if not ok:
+        lines.append("  no identification produced a result: see the lines above")
+    return lines
+
+
+async def _demo(args) -> int:
+    import asyncio
+    import contextlib
+    import json
+    import logging
+    import shutil
+    import tempfile
+    import time
+    from pathlib import Path
+
+    import aiomqtt
+
+    from fcrlive.daemon.broker import EmbeddedBroker, MosquittoBroker, start_broker
+    from fcrlive.daemon.config import load_config
+    from fcrlive.daemon.health import setup_logging
+    from fcrlive.daemon.service import Service
+    from fcrlive.errors import UserError
+    from sim_device import SimGovernor
+
+    setup_logging(args.log_level)
+    logging.getLogger("sim_device").setLevel(max(logging.WARNING, logging.getLogger().level))
+    tmp = tempfile.TemporaryDirectory(prefix="fcrlive-demo-")
+    store = Path(args.store) if args.store else Path(tmp.name) / "demo.sqlite"
+    unit = "demo"
+    async with contextlib.AsyncExitStack() as stack:
+        stack.callback(tmp.cleanup)
+        if args.mqtt_host:
+            host, port, broker_kind = args.mqtt_host, args.mqtt_port, "external"
+        else:
+            if args.broker == "mosquitto" and not shutil.which("mosquitto"):
+                raise UserError("--broker mosquitto: mosquitto is not on PATH (use --broker embedded)")
+            broker = (EmbeddedBroker() if args.broker == "embedded" else
+                      MosquittoBroker() if args.broker == "mosquitto" else start_broker())
+            await stack.enter_async_context(broker)
+            host, port, broker_kind = broker.host, broker.port, broker.kind
+        gov = await stack.enter_async_context(SimGovernor(port=0, speed=args.speed, seed=args.seed))
+        truth_task = asyncio.create_task(asyncio.to_thread(gov.truth, True))
+        speed = args.speed
+        overrides = dict(
+            unit={"name": unit, "rated_mw": gov.rated_mw, "f0": gov.f0, "kd": 0.1},
+            source={"kind": "modbus", "modbus": {"host": "127.0.0.1", "port": gov.port,
+                                                 "poll_hz": args.poll_hz, "register_map": str(_registers())}},
+            store={"path": str(store), "retention_hours": 24.0},
+            identification={"every_min": args.every_min / speed, "window_min": args.window_min / speed},
+            mqtt={"host": host, "port": port, "stats_interval_s": 5.0, "client_id": f"fcrlive-demo-{port}"},
+            metrics={"enabled": False},
+        )
+        if args.excitation:
+            overrides["excitation"] = {"enabled": True, "period_s": max(0.02, 0.1 / speed),
+                                       "limits": {"holdoff_s": 1.0},
+                                       "generator": {"kind": "white", "seed": 7}}
+        cfg = load_config(None, **overrides)
+        window_wall = args.window_min * 60 / speed
+        every_wall = args.every_min * 60 / speed
+        limit_s = args.minutes * 60 if args.minutes else (
+            window_wall + every_wall * (args.identifications + 1) + 120.0)
+        print(f"fcrlive demo: simulated governor (paper plant 1: droop 8 %, max|S| 1.29, max|G_1| 1.01) "
+              f"on 127.0.0.1:{gov.port} at {speed:g}x, MQTT {broker_kind} broker on {host}:{port}, "
+              f"store {store}")
+        print(f"  polling {args.poll_hz:g} Hz (a sample every {speed / args.poll_hz:.2f} simulated s); "
+              f"a {args.window_min:g} sim-min window every {args.every_min:g} sim-min "
+              f"({window_wall:.0f} s / {every_wall:.0f} s wall); excitation "
+              f"{'ON (white noise 0.1 Hz, guarded)' if args.excitation else 'off (Z_u)'}; "
+              f"subscribe: mosquitto_sub -h {host} -p {port} -t 'fcrlive/{unit}/#' -v", flush=True)
+        svc = Service(cfg, version="demo")
+        stop = asyncio.Event()
+        daemon = asyncio.create_task(svc.run(stop), name="daemon")
+        results: list[dict] = []
+        t0 = time.monotonic()
+        last_live = 0.0
+        try:
+            async with asyncio.timeout(limit_s):
+                async with aiomqtt.Client(host, port, identifier=f"fcrlive-demo-view-{port}") as client:
+                    await client.subscribe(f"fcrlive/{unit}/result/latest", qos=1)
+                    await client.subscribe(f"fcrlive/{unit}/live", qos=0)
+                    async for m in client.messages:
+                        if daemon.done():
+                            break
+                        msg = json.loads(m.payload)
+                        if str(m.topic).endswith("/live"):
+                            if time.monotonic() - last_live >= 15.0:
+                                last_live = time.monotonic()
+                                s = msg["signals"]
+                                p = (s.get("power") or {}).get("mean")
+                                f = (s.get("grid_freq") or {}).get("mean")
+                                rate = f"  live: {msg['rate_hz']:.1f} samples/s"
+                                print(f"{rate}, ok {msg['quality']['ok']}, P {p:.1f} MW, f {f:.3f} Hz"
+                                      if p is not None and f is not None else f"{rate} (no good samples yet)",
+                                      flush=True)
+                            continue
+                        if not msg["ok"] and msg["error"] and msg["error"].startswith("too little good data"):
+                            print(f"  (window not full yet: {msg['error']})", flush=True)
+                            continue
+                        results.append(msg)
+                        print(result_line(len(results), msg, speed), flush=True)
+                        if len(results) >= args.identifications:
+                            break
+        except TimeoutError:
+            print(f"fcrlive demo: stopped after {limit_s / 60:.1f} wall minutes", flush=True)
+        finally:
+            stop.set()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(daemon, 30)
+        if daemon.done() and not daemon.cancelled() and daemon.exception() is not None:
+            raise daemon.exception()
+        truth = await truth_task
+        for line in summary_lines(results, truth, 0.1, time.monotonic() - t0, speed):
+            print(line)
+    return 0 if results else 1
+
+
+def _registers():
+    from sim_device.registers import DEFAULT_MAP_PATH
+
+    return DEFAULT_MAP_PATH
+
+
+def run(args: argparse.Namespace) -> int:
+    import asyncio
+
+    _check(args)
+    if args.excitation:
+        try:
+            import fcrlive.excitation.task  # noqa: F401
+        except ImportError:
+            from fcrlive.errors import UserError
+
+            raise UserError("--excitation: the excitation writer is not available in this version") from None
+    return asyncio.run(_demo(args))
