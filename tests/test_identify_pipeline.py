@@ -197,3 +197,16 @@ def test_zcu_coverage_20_seeds(truth):
     assert hits["droop"] / n >= 0.8
     assert hits["max_g1"] / n >= 0.8
     assert hits["max_s"] / n >= 0.65
+
+
+def test_peak_band_in_report(zcu_run, truth):
+    from fcrlive.analysis.assess import PEAK_MIN_PERIOD_S, peak_band
+
+    lo, hi = zcu_run.report.peak_band_rad_s
+    assert (lo, hi) == pytest.approx(peak_band(0.5))
+    assert hi == pytest.approx(2 * np.pi / PEAK_MIN_PERIOD_S)
+    assert peak_band(0.5, 1.0)[1] == pytest.approx(0.5 * 0.8 * np.pi / 0.5)  # passband fraction caps it
+    # the true peaks (0.14 and 0.29 rad/s) lie well inside; the identified ones are found there
+    for pk in (zcu_run.report.max_abs_g1, zcu_run.report.max_abs_s):
+        assert lo < pk.omega < 0.5 * hi
+    assert "peak band" in __import__("fcrlive.analysis.report", fromlist=["x"]).text_summary(zcu_run.report)

@@ -5,9 +5,15 @@ Input: an :class:`fcrlive.analysis.experiments.ExperimentResult` (closed-loop me
 
 - Droop: effective droop ρ_eff = 1/(1/G_1(0) − K_d) (K_d = 0 unless given) from G_1(1) of the discrete
   model, the interval by the monotone map of the 95 % interval of G_1(1) (analysis.local).
-- max|G_1| and max|S| over (1e-3 rad/s, Nyquist of the identification rate) with their ω and the
-  first-order sd of the maximum (PeakGain); eq. (9) and (10) by analysis.local; gain/phase/stability
-  margins of L = G_p G_J.
+- max|G_1| and max|S| over the PEAK BAND (1e-3 rad/s, ω_peak) with their ω and the first-order sd of the
+  maximum (PeakGain); eq. (9) and (10) by analysis.local over the same band; gain/phase/stability margins
+  of L = G_p G_J up to the Nyquist frequency of the identification rate. ω_peak = min(2π/T_min,
+  ``PEAK_PASSBAND_FRACTION`` × the anti-aliasing passband edge 0.8·π/Ts), T_min = ``peak_min_period_s``
+  (default :data:`PEAK_MIN_PERIOD_S` = 4 s, ω ≤ 1.57 rad/s): above it the decimated data carry little
+  information (filter roll-off, a few samples per period) and a fitted model's gain there is an
+  artefact of its structure, not a measurement. The FCR band of interest is 10-300 s and the peaks of
+  G_1 and S sit at 0.14-0.3 rad/s (periods 20-45 s). On Z_u (no excitation) the unrestricted search
+  found "peaks" at the Nyquist frequency 6.28 rad/s, +135 … +760 % above the true maximum.
 - TSO: F = G_p/G_p(0) (unit static gain; the TSO's normalisation with ΔP_ss,theo from the identified
   droop), optionally times F_FME; Req. 8 in the 10-300 s band and over (1e-4 rad/s, Nyquist) with the
   encirclement count, Req. 9 with K_red,dyn (analysis.tso_checks), both with the 95 % bounds from the
@@ -28,6 +34,19 @@ from fcrlive.ident import Z95, FreqResp, PeakGain
 
 OMEGA_MIN = 1e-3
 """Lower end [rad/s] of the grid for peaks and margins (a 6000 s period)."""
+PEAK_MIN_PERIOD_S = 4.0
+"""Default shortest period [s] of the peak band for max|G_1|, max|S| and eq. 9-10 (module docstring)."""
+PEAK_PASSBAND_FRACTION = 0.5
+"""The peak band also ends at this fraction of the anti-aliasing passband edge 0.8·π/Ts."""
+
+
+def peak_band(ts_id: float, peak_min_period_s: float = PEAK_MIN_PERIOD_S) -> tuple[float, float]:
+    """(ω_min, ω_max) [rad/s] in which max|G_1| and max|S| are searched (module docstring)."""
+    if not peak_min_period_s > 0:
+        raise ValueError(f"peak_min_period_s must be positive, got {peak_min_period_s}")
+    nyq = np.pi / float(ts_id)
+    hi = min(2 * np.pi / peak_min_period_s, PEAK_PASSBAND_FRACTION * 0.8 * nyq, 0.999 * nyq)
+    return OMEGA_MIN, float(max(hi, 2 * OMEGA_MIN))
 
 
 @dataclass(frozen=True)
@@ -75,6 +94,8 @@ class Assessment:
     disturbance: local.DisturbanceCheck | None
     margins: local.LoopMargins | None
     warnings: tuple[str, ...] = ()
+    peak_band: tuple[float, float] | None = None
+    """(ω_min, ω_max) [rad/s] of the search for max|G_1|, max|S| and eq. 9-10 (None for sine tests)."""
     responses: object = field(default=None, compare=False)
     """ω → dict of FreqResp (closed-loop methods), for plots."""
     F_callable: object = field(default=None, compare=False)
@@ -86,7 +107,7 @@ def _grid(omega_max: float, n: int = 1500) -> np.ndarray:
 
 
 def _peak(fr_fun, key: str, omega_max: float) -> PeakEstimate:
-    w = _grid(omega_max)
+    w = _grid(omega_max, 1000)
     g = fr_fun(w)[key]
     j = int(np.argmax(g.abs))
     lo, hi = w[max(j - 1, 0)], w[min(j + 1, w.size - 1)]
@@ -135,13 +156,20 @@ def assess(
     kd: float = 0.0,
     t_fme_s: float | None = None,
     products=("fcrn", "fcrd"),
+    peak_min_period_s: float = PEAK_MIN_PERIOD_S,
 ) -> Assessment:
-    """Everything the report shows, from one experiment (module docstring)."""
+    """Everything the report shows, from one experiment (module docstring).
+
+    ``peak_min_period_s``: shortest period of the band in which max|G_1|, max|S| and eq. 9-10 are
+    evaluated (:func:`peak_band`).
+    """
     if isinstance(result, SineExperiment):
         return _assess_sine(result, t_fme_s=t_fme_s, products=products)
     warns = list(result.warnings)
     fr = _memo(result.responses)
     wmax = result.omega_max * 0.999
+    band = peak_band(result.Ts, peak_min_period_s)
+    wpk = band[1]
     g1_0 = fr(np.array([1e-7]))["G_1"]
     g = float(g1_0.value.real[0])
     sd = float(g1_0.sd_real[0])
@@ -152,16 +180,16 @@ def assess(
         droop = Interval(d.value, d.lower, d.upper)
     else:
         warns.append(f"identified G_1(1) = {g:.3g} is not positive: no droop")
-    max_g1 = _peak(fr, "G_1", wmax)
+    max_g1 = _peak(fr, "G_1", wpk)
     G1c = _callable(fr, "G_1")
-    dist = local.check_disturbance_rejection(G1c, omega_range=(OMEGA_MIN, wmax))
+    dist = local.check_disturbance_rejection(G1c, omega_range=band)
     max_s = sens = margins = None
     gp = f = tso = None
     F = F_sd = None
     if "S" in result.identifiable:
-        max_s = _peak(fr, "S", wmax)
+        max_s = _peak(fr, "S", wpk)
         sens = local.check_sensitivity(
-            _callable(fr, "S"), omega_range=(OMEGA_MIN, wmax), S_sd=_callable(fr, "S", what="sd")
+            _callable(fr, "S"), omega_range=band, S_sd=_callable(fr, "S", what="sd")
         )
         R = fr(np.array([1e-7]))
         L = lambda w: _callable(fr, "G_p")(w) * _callable(fr, "G_J")(w)  # noqa: E731
@@ -199,6 +227,7 @@ def assess(
         dist,
         margins,
         tuple(warns),
+        band,
         fr,
         F,
         F_sd,

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from fcrlive.analysis import experiments as ex
-from fcrlive.analysis.assess import Assessment, assess
+from fcrlive.analysis.assess import PEAK_MIN_PERIOD_S, Assessment, assess
 from fcrlive.analysis.report import IdentifyReport, build_report
 from fcrlive.constants import F0_HZ
 from fcrlive.errors import DataError, UserError
@@ -94,10 +94,12 @@ def identify_signals(
     method: str = "auto",
     ts_id: float = ex.DEFAULT_TS_ID,
     t_fme_s: float | None = None,
+    peak_min_period_s: float = PEAK_MIN_PERIOD_S,
 ) -> IdentifyReport:
     """Identify and assess; returns the report (see :func:`identify_full` for the objects behind it)."""
     return identify_full(
-        signals, rated_mw=rated_mw, f0=f0, kd=kd, plant=plant, method=method, ts_id=ts_id, t_fme_s=t_fme_s
+        signals, rated_mw=rated_mw, f0=f0, kd=kd, plant=plant, method=method, ts_id=ts_id, t_fme_s=t_fme_s,
+        peak_min_period_s=peak_min_period_s,
     ).report
 
 
@@ -111,9 +113,12 @@ def identify_full(
     method: str = "auto",
     ts_id: float = ex.DEFAULT_TS_ID,
     t_fme_s: float | None = None,
+    peak_min_period_s: float = PEAK_MIN_PERIOD_S,
 ) -> Identification:
     """The pipeline (module docstring). ``plant``: an fcrlive Plant; its controller is used for Z_cu and
-    its droop for the sine-test normalisation. Raises DataError/UserError with one-line messages."""
+    its droop for the sine-test normalisation. ``peak_min_period_s``: shortest period of the band in which
+    max|G_1| and max|S| are searched (analysis.assess.peak_band). Raises DataError/UserError with
+    one-line messages."""
     sigs = [signals] if isinstance(signals, PlantSignals) else list(signals)
     if not sigs:
         raise UserError("no data")
@@ -161,7 +166,7 @@ def identify_full(
         exp = ex.zur(sig, ts_id=ts_id)
     else:
         exp = ex.zu(sig, ts_id=ts_id)
-    a = assess(exp, kd=kd, t_fme_s=t_fme_s)
+    a = assess(exp, kd=kd, t_fme_s=t_fme_s, peak_min_period_s=peak_min_period_s)
     if kd == 0.0:
         extra.append("Kd = 0 assumed: the droop shown is 1/(1/G_1(0)), i.e. including the speed damping")
     rep = build_report(

@@ -102,6 +102,10 @@ class IdentifyReport(BaseModel):
     g1_static: ValueCI | None
     max_abs_g1: PeakCI | None
     max_abs_s: PeakCI | None
+    peak_band_rad_s: list[float] | None = Field(
+        default=None,
+        description="[ω_min, ω_max] rad/s in which max_abs_g1, max_abs_s and eq. 9-10 are searched",
+    )
     gp_kind: str
     gp: list[PeriodValue] | None
     f: list[PeriodValue] | None
@@ -220,6 +224,7 @@ def build_report(
         g1_static=g1s,
         max_abs_g1=mg1,
         max_abs_s=ms,
+        peak_band_rad_s=None if a.peak_band is None else [_f(a.peak_band[0]), _f(a.peak_band[1])],
         gp_kind=a.gp_kind,
         gp=_period_values(a.gp),
         f=_period_values(a.f),
@@ -265,6 +270,12 @@ def text_summary(r: IdentifyReport) -> str:
         if pk is not None and pk.omega:
             s += f"  at ω = {pk.omega:.3f} rad/s (T = {2 * math.pi / pk.omega:.1f} s)"
         lines.append(f"{name:<28}{s}")
+    if r.peak_band_rad_s is not None and r.max_abs_g1 is not None:
+        lo, hi = r.peak_band_rad_s
+        lines.append(
+            f"{'peak band':<28}{lo:.3g}-{hi:.3g} rad/s "
+            f"(periods {2 * math.pi / hi:.1f}-{2 * math.pi / lo:.0f} s)"
+        )
     if r.controller is not None:
         c = r.controller
         lines.append(
