@@ -1,94 +1,52 @@
-"""The simulated governor's register map: loader, validation and encode/decode helpers.
+"""The simulated governor's register map: a thin layer over :mod:`fcrlive.daemon.registers`.
 
 The map is a TOML file (``registers.toml`` beside this module, documented in REGISTERS.md) with
-``unit_id``, ``word_order``, ``byte_order`` and a list of ``[[points]]``. The fcrlive daemon reads the
-same format. Values are converted with pymodbus's ``convert_to_registers`` / ``convert_from_registers``
-(word order handled there); ``byte_order = "little"`` swaps the two bytes inside every register.
+``unit_id``, ``word_order``, ``byte_order`` and a list of ``[[points]]``, the format the fcrlive daemon
+reads. Points, the overlap check and the value codec (type, scale/offset, word and byte order) are the
+daemon's; this module adds the simulator's side: strict validation with ConfigError messages, whole-table
+encode/decode for the register blocks it serves, and writing a map back as TOML.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
+import struct
 import tomllib
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
-from typing import Literal
 
-from pymodbus.client.mixin import ModbusClientMixin
-
+from fcrlive.daemon.registers import (
+    TYPE_WORDS,
+    Order,
+    Table,
+    decode_raw,
+    encode_raw,
+    find_overlap,
+    register_map_from_dict,
+)
+from fcrlive.daemon.registers import RegisterMap as _DaemonRegisterMap
+from fcrlive.daemon.registers import RegisterPoint as Point
 from fcrlive.errors import ConfigError
+
+__all__ = ["DEFAULT_MAP_PATH", "Point", "RegisterMap", "load_map", "parse_map"]
 
 DEFAULT_MAP_PATH = Path(__file__).with_name("registers.toml")
 
-Table = Literal["input", "holding"]
-Order = Literal["big", "little"]
-
-_DT = ModbusClientMixin.DATATYPE
-TYPES: dict[str, tuple[ModbusClientMixin.DATATYPE, int]] = {
-    "int16": (_DT.INT16, 1),
-    "uint16": (_DT.UINT16, 1),
-    "int32": (_DT.INT32, 2),
-    "uint32": (_DT.UINT32, 2),
-    "float32": (_DT.FLOAT32, 2),
-    "float64": (_DT.FLOAT64, 4),
-}
-_INT_RANGES = {
-    "int16": (-(2**15), 2**15 - 1),
-    "uint16": (0, 2**16 - 1),
-    "int32": (-(2**31), 2**31 - 1),
-    "uint32": (0, 2**32 - 1),
-}
 _POINT_KEYS = {"name", "table", "address", "type", "scale", "offset", "unit", "writable", "description"}
 
 
-@dataclass(frozen=True)
-class Point:
-    """One named value in the device: where it lives and how to convert it."""
-
-    name: str
-    table: Table
-    address: int
-    type: str
-    scale: float = 1.0
-    offset: float = 0.0
-    unit: str = ""
-    writable: bool = False
-    description: str = ""
-
-    @property
-    def count(self) -> int:
-        """Number of 16-bit registers."""
-        return TYPES[self.type][1]
-
-    @property
-    def end(self) -> int:
-        """One past the last register address."""
-        return self.address + self.count
-
-    @property
-    def is_float(self) -> bool:
-        return self.type.startswith("float")
-
-
-@dataclass(frozen=True)
-class RegisterMap:
-    """A validated register map (immutable)."""
-
-    unit_id: int
-    word_order: Order
-    byte_order: Order
-    points: tuple[Point, ...]
+class RegisterMap(_DaemonRegisterMap):
+    """A validated register map (immutable): the daemon's map plus the simulator's helpers."""
 
     # ------------------------------------------------------------------ look-up
     def point(self, name: str) -> Point:
-        for p in self.points:
-            if p.name == name:
-                return p
-        raise KeyError(f"no point named {name!r} in the register map")
+        try:
+            return super().point(name)
+        except KeyError:
+            raise KeyError(f"no point named {name!r} in the register map") from None
 
     def __contains__(self, name: object) -> bool:
-        return any(p.name == name for p in self.points)
+        return name in self.names
 
     def table(self, table: Table) -> tuple[Point, ...]:
         """Points of one table, by address."""
@@ -108,38 +66,28 @@ class RegisterMap:
         return replace(self, word_order=word_order)
 
     # ----------------------------------------------------------- conversions
-    def _swap(self, regs: list[int]) -> list[int]:
-        if self.byte_order == "little":
-            return [((r & 0xFF) << 8) | (r >> 8) for r in regs]
-        return list(regs)
-
     def encode(self, point: Point | str, value: float) -> list[int]:
         """Engineering value -> registers (scale/offset, type, word and byte order)."""
         p = self.point(point) if isinstance(point, str) else point
         raw: float | int = (value - p.offset) / p.scale if (p.scale != 1.0 or p.offset != 0.0) else value
-        if not p.is_float:
-            if not math.isfinite(raw):
-                raise ValueError(f"{p.name}: cannot encode {value!r} as {p.type}")
-            lo, hi = _INT_RANGES[p.type]
-            raw = round(raw)
-            if not lo <= raw <= hi:
-                raise ValueError(f"{p.name}: {value!r} out of range for {p.type}")
-        else:
-            raw = float(raw)
-        regs = ModbusClientMixin.convert_to_registers(raw, TYPES[p.type][0], word_order=self.word_order)
-        return self._swap(regs)
+        if p.type.startswith("float"):
+            return encode_raw(float(raw), p.type, self.word_order, self.byte_order)
+        if not math.isfinite(raw):
+            raise ValueError(f"{p.name}: cannot encode {value!r} as {p.type}")
+        try:
+            return encode_raw(raw, p.type, self.word_order, self.byte_order)
+        except struct.error:
+            raise ValueError(f"{p.name}: {value!r} out of range for {p.type}") from None
 
     def decode(self, point: Point | str, regs: list[int]) -> float | int:
-        """Registers (exactly ``point.count`` of them) -> engineering value."""
+        """Registers (exactly ``point.words`` of them) -> engineering value."""
         p = self.point(point) if isinstance(point, str) else point
-        if len(regs) != p.count:
-            raise ValueError(f"{p.name}: expected {p.count} registers, got {len(regs)}")
-        raw = ModbusClientMixin.convert_from_registers(
-            self._swap(list(regs)), TYPES[p.type][0], word_order=self.word_order
-        )
+        if len(regs) != p.words:
+            raise ValueError(f"{p.name}: expected {p.words} registers, got {len(regs)}")
+        raw = decode_raw(regs, p.type, self.word_order, self.byte_order)
         if p.scale == 1.0 and p.offset == 0.0:
-            return raw  # type: ignore[return-value]
-        return raw * p.scale + p.offset  # type: ignore[operator]
+            return raw
+        return raw * p.scale + p.offset
 
     def decode_block(self, table: Table, start: int, regs: list[int]) -> dict[str, float | int]:
         """Decode every point of ``table`` lying wholly inside ``regs`` read from address ``start``."""
@@ -187,6 +135,49 @@ def _q(s: str) -> str:
     return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
+def _check_point(rp: object, where: str, i: int) -> dict:
+    """Raw ``points[i]`` -> the keyword arguments of a :class:`Point` (ConfigError if invalid)."""
+    pw = f"{where}: points[{i}]"
+    if not isinstance(rp, dict):
+        raise ConfigError("each point must be a table", pw)
+    bad = set(rp) - _POINT_KEYS
+    if bad:
+        raise ConfigError(f"unknown key(s) {', '.join(sorted(bad))}", pw)
+    for key in ("name", "table", "address", "type"):
+        if key not in rp:
+            raise ConfigError(f"missing key {key!r}", pw)
+    name = rp["name"]
+    if not isinstance(name, str) or not name:
+        raise ConfigError("name must be a non-empty string", pw)
+    pw = f"{where}: point {name!r}"
+    if rp["table"] not in ("input", "holding"):
+        raise ConfigError(f"table must be 'input' or 'holding', not {rp['table']!r}", pw)
+    if rp["type"] not in TYPE_WORDS:
+        raise ConfigError(f"type must be one of {', '.join(TYPE_WORDS)}, not {rp['type']!r}", pw)
+    addr = rp["address"]
+    if not isinstance(addr, int) or isinstance(addr, bool) or not 0 <= addr <= 65535:
+        raise ConfigError(f"address must be an integer 0..65535, not {addr!r}", pw)
+    scale = rp.get("scale", 1.0)
+    offset = rp.get("offset", 0.0)
+    for key, val in (("scale", scale), ("offset", offset)):
+        if not isinstance(val, int | float) or isinstance(val, bool) or not math.isfinite(val):
+            raise ConfigError(f"{key} must be a finite number, not {val!r}", pw)
+    if scale == 0:
+        raise ConfigError("scale must not be 0", pw)
+    writable = rp.get("writable", False)
+    if not isinstance(writable, bool):
+        raise ConfigError("writable must be true or false", pw)
+    if writable and rp["table"] == "input":
+        raise ConfigError("input registers cannot be writable", pw)
+    if addr + TYPE_WORDS[rp["type"]] > 65536:
+        raise ConfigError("point runs past address 65535", pw)
+    return {
+        "name": name, "table": rp["table"], "address": addr, "type": rp["type"],
+        "scale": float(scale), "offset": float(offset), "unit": str(rp.get("unit", "")),
+        "writable": writable, "description": str(rp.get("description", "")),
+    }
+
+
 def parse_map(data: dict, where: str = "register map") -> RegisterMap:
     """Validate a parsed TOML document into a :class:`RegisterMap` (ConfigError on any problem)."""
     unknown = set(data) - {"unit_id", "word_order", "byte_order", "points"}
@@ -204,69 +195,17 @@ def parse_map(data: dict, where: str = "register map") -> RegisterMap:
     raw_points = data.get("points")
     if not isinstance(raw_points, list) or not raw_points:
         raise ConfigError("no [[points]] defined", where)
-    points: list[Point] = []
-    for i, rp in enumerate(raw_points):
-        pw = f"{where}: points[{i}]"
-        if not isinstance(rp, dict):
-            raise ConfigError("each point must be a table", pw)
-        bad = set(rp) - _POINT_KEYS
-        if bad:
-            raise ConfigError(f"unknown key(s) {', '.join(sorted(bad))}", pw)
-        for key in ("name", "table", "address", "type"):
-            if key not in rp:
-                raise ConfigError(f"missing key {key!r}", pw)
-        name = rp["name"]
-        if not isinstance(name, str) or not name:
-            raise ConfigError("name must be a non-empty string", pw)
-        pw = f"{where}: point {name!r}"
-        if rp["table"] not in ("input", "holding"):
-            raise ConfigError(f"table must be 'input' or 'holding', not {rp['table']!r}", pw)
-        if rp["type"] not in TYPES:
-            raise ConfigError(f"type must be one of {', '.join(TYPES)}, not {rp['type']!r}", pw)
-        addr = rp["address"]
-        if not isinstance(addr, int) or isinstance(addr, bool) or not 0 <= addr <= 65535:
-            raise ConfigError(f"address must be an integer 0..65535, not {addr!r}", pw)
-        scale = rp.get("scale", 1.0)
-        offset = rp.get("offset", 0.0)
-        for key, val in (("scale", scale), ("offset", offset)):
-            if not isinstance(val, int | float) or isinstance(val, bool) or not math.isfinite(val):
-                raise ConfigError(f"{key} must be a finite number, not {val!r}", pw)
-        if scale == 0:
-            raise ConfigError("scale must not be 0", pw)
-        writable = rp.get("writable", False)
-        if not isinstance(writable, bool):
-            raise ConfigError("writable must be true or false", pw)
-        if writable and rp["table"] == "input":
-            raise ConfigError("input registers cannot be writable", pw)
-        p = Point(
-            name=name,
-            table=rp["table"],
-            address=addr,
-            type=rp["type"],
-            scale=float(scale),
-            offset=float(offset),
-            unit=str(rp.get("unit", "")),
-            writable=writable,
-            description=str(rp.get("description", "")),
-        )
-        if p.end > 65536:
-            raise ConfigError("point runs past address 65535", pw)
-        points.append(p)
-    names = [p.name for p in points]
+    points = [_check_point(rp, where, i) for i, rp in enumerate(raw_points)]
+    names = [p["name"] for p in points]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise ConfigError(f"duplicate point name(s) {', '.join(dup)}", where)
-    for table in ("input", "holding"):
-        pts = sorted((p for p in points if p.table == table), key=lambda p: p.address)
-        for a, b in itertools.pairwise(pts):
-            if b.address < a.end:
-                raise ConfigError(f"points {a.name!r} and {b.name!r} overlap in the {table} table", where)
-    return RegisterMap(
-        unit_id=unit_id,
-        word_order=orders["word_order"],
-        byte_order=orders["byte_order"],
-        points=tuple(points),
-    )
+    rmap = register_map_from_dict({"unit_id": unit_id, **orders, "points": points})
+    pair = find_overlap(rmap.points)
+    if pair:
+        a, b = pair
+        raise ConfigError(f"points {a.name!r} and {b.name!r} overlap in the {a.table} table", where)
+    return RegisterMap(**vars(rmap))
 
 
 def load_map(path: str | Path | None = None) -> RegisterMap:
