@@ -122,15 +122,19 @@ def test_zur_picked_without_c_a(excited):
     assert choose_method([sig])[0] == "zur"
 
 
-@pytest.mark.xfail(strict=False, reason="SISO BJ ε ← u on 15 min without excitation at 12 dB: exact on "
-                   "noise-free data (test_identify_deterministic) but with noise seeds 0-2 give droop "
-                   "n.a./−1.1/−11.8 % with intervals of ±20-100 % and max|G_1| +136..+760 %")
-def test_zu_droop(truth):
-    res = simulate(PLANT, SimConfig(duration_s=900, snr_db=12.0, excitation=False, seed=0))
+@pytest.mark.parametrize("seed", (0, 1, 2))
+def test_zu_droop(truth, seed):
+    # the target: ±0.3 percentage points from 15 min without excitation at 12 dB (measured
+    # −0.02/+0.00/−0.07 pp with BIC over the candidate orders at 1 s; a single order missed by 1-5 pp)
+    res = simulate(PLANT, SimConfig(duration_s=900, snr_db=12.0, excitation=False, seed=seed))
     sig = plant_signals(log_from_sim(res), rated_mw=300.0)
     r = identify_full(sig, rated_mw=300.0, kd=KD).report
     assert r.method == "zu"
     assert abs(r.droop.value - truth["droop"]) <= 0.003
+    assert r.droop.ci95[0] <= truth["droop"] <= r.droop.ci95[1]
+    assert r.max_abs_s is None
+    lo, hi = r.peak_band_rad_s
+    assert lo < r.max_abs_g1.omega < hi
 
 
 @pytest.fixture(scope="module")
