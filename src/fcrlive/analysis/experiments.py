@@ -480,6 +480,8 @@ ZU_TS_MIN = 1.0
 """Z_u is identified at max(ts_id, this) [s] (:func:`zu`)."""
 ZU_ORDERS = ((3, 2, 2, 3), (3, 3, 3, 3), (3, 4, 4, 3), (3, 2, 2, 4), (3, 4, 4, 4))
 """Candidate Box-Jenkins orders (nb, nc, nd, nf) of Z_u; the smallest BIC wins (:func:`zu`)."""
+ZU_MULTISTART = "auto"
+"""``multistart`` of each Z_u candidate fit (ident.bj)."""
 
 
 def zu(
@@ -512,7 +514,7 @@ def zu(
     for o in cands:
         nb, nc, nd, nf = o
         try:
-            m = bj(d, nb, nc, nd, nf, 0, **FIT)
+            m = bj(d, nb, nc, nd, nf, 0, multistart=ZU_MULTISTART, **FIT)
         except (IdentError, ValueError, np.linalg.LinAlgError) as exc:
             errs.append(f"{o}: {exc}")
             continue
