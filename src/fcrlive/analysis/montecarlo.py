@@ -226,8 +226,8 @@ def coverage(lo, hi, true_value) -> float:
 # Estimates of one run
 
 
-def _peak(fr_fun, key: str, omega_max: float):
-    w = np.geomspace(OMEGA_MIN, omega_max, 1500)
+def _peak(fr_fun, key: str, omega_min: float, omega_max: float):
+    w = np.geomspace(omega_min, omega_max, 1500)
     g = fr_fun(w)[key]
     j = int(np.argmax(g.abs))
     lo, hi = w[max(j - 1, 0)], w[min(j + 1, w.size - 1)]
@@ -242,9 +242,13 @@ def closed_loop_estimates(exp, periods_s: Sequence[float], grid: np.ndarray = GR
     g0 = fr(np.array([1e-7]))["G_1"]
     v, sd = float(g0.value.real[0]), float(g0.sd_real[0])
     row.update(g1_static=v, g1_static_lo=v - Z95 * sd, g1_static_hi=v + Z95 * sd)
+    # The same band as `fcrlive identify` reports: peaks beyond the data's passband are model artefacts.
+    from fcrlive.analysis.assess import peak_band
+
+    band = peak_band(exp.Ts)
     for name, key in (("max_g1", "G_1"), ("max_s", "S")):
         if key in exp.identifiable:
-            pk = _peak(fr, key, wmax)
+            pk = _peak(fr, key, *band)
             lo, hi = pk.ci95()
             row.update({name: pk.value, f"{name}_lo": lo, f"{name}_hi": hi, f"{name}_omega": pk.omega})
     keys = [k for k in ("G_1", "S", "G_p") if k in exp.identifiable]
