@@ -25,6 +25,7 @@ def test_demo_runs_without_mosquitto_and_prints_a_summary(tmp_path):
     out = p.stdout
     assert "amqtt broker" in out
     assert "#1 15.0 sim-min window" in out
+    assert "into the SIMULATED governor only" in out
     assert "demo summary: 1 identification(s), 1 with a result" in out
     assert "droop     truth 8 %" in out
     assert "Traceback" not in p.stderr

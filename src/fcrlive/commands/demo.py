@@ -20,6 +20,9 @@ HELP = ("run the whole system on embedded defaults (simulated governor, MQTT bro
         "show results live")
 
 
+EXC_ON = "ON (white noise 0.1 Hz through the safety guard, into the SIMULATED governor only)"
+
+
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speed", type=float, default=10.0,
                         help="simulated seconds per wall second (default 10)")
@@ -34,8 +37,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--minutes", type=float, default=None,
                         help="stop after this many WALL minutes at the latest (default: enough for the "
                              "identifications)")
-    parser.add_argument("--excitation", action="store_true",
-                        help="write the paper's white-noise excitation (0.1 Hz) through the safety guard")
+    parser.add_argument("--excitation", action=argparse.BooleanOptionalAction, default=True,
+                        help="write the paper's white-noise excitation (0.1 Hz) through the safety guard "
+                             "into the SIMULATED governor (default on: Z_cu, max|S|, TSO checks need it; "
+                             "--no-excitation: Z_u, droop and max|G_1| only)")
     parser.add_argument("--broker", choices=("embedded", "mosquitto", "auto"), default="embedded",
                         help="MQTT broker to start: embedded amqtt (default), a private mosquitto, or auto")
     parser.add_argument("--mqtt-host", default=None, help="use this running broker instead of starting one")
@@ -161,9 +166,12 @@ async def _demo(args) -> int:
             host, port, broker_kind = broker.host, broker.port, broker.kind
         gov = await stack.enter_async_context(SimGovernor(port=0, speed=args.speed, seed=args.seed))
         truth_task = asyncio.create_task(asyncio.to_thread(gov.truth, True))
+        # the simulated plant's description: Z_cu takes the controller from it (as a site's [unit] plant)
+        plant_file = Path(tmp.name) / "plant.toml"
+        plant_file.write_text('preset = "paper-plant1"\n')
         speed = args.speed
         overrides = dict(
-            unit={"name": unit, "rated_mw": gov.rated_mw, "f0": gov.f0, "kd": 0.1},
+            unit={"name": unit, "rated_mw": gov.rated_mw, "f0": gov.f0, "kd": 0.1, "plant": str(plant_file)},
             source={"kind": "modbus", "modbus": {"host": "127.0.0.1", "port": gov.port,
                                                  "poll_hz": args.poll_hz, "register_map": str(_registers())}},
             store={"path": str(store), "retention_hours": 24.0},
@@ -186,7 +194,7 @@ async def _demo(args) -> int:
         print(f"  polling {args.poll_hz:g} Hz (a sample every {speed / args.poll_hz:.2f} simulated s); "
               f"a {args.window_min:g} sim-min window every {args.every_min:g} sim-min "
               f"({window_wall:.0f} s / {every_wall:.0f} s wall); excitation "
-              f"{'ON (white noise 0.1 Hz, guarded)' if args.excitation else 'off (Z_u)'}; "
+              f"{EXC_ON if args.excitation else 'off (Z_u)'}; "
               f"subscribe: mosquitto_sub -h {host} -p {port} -t 'fcrlive/{unit}/#' -v", flush=True)
         svc = Service(cfg, version="demo")
         stop = asyncio.Event()
