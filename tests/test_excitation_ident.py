@@ -49,3 +49,21 @@ def test_identification_with_excitation_within_tolerances(runs):
     assert abs(with_r["max_g1_err_pct"]) <= 5.0
     # the point of exciting: over the same 10 minutes the droop interval is far narrower
     assert with_r["droop_ci_width_pp"] < 0.1 * without["droop_ci_width_pp"]
+
+
+def test_gp_with_excitation_matches_the_plant_at_the_tso_periods(runs):
+    """G_p (what the TSO checks use) at every TR sine period, against the analytic G_p of the plant."""
+    import numpy as np
+
+    from fcrlive.plant.params import preset
+    from fcrlive.plant.transfer import analytic, freqresp
+
+    exc, _ = runs
+    report = study.identify(exc)
+    assert report.gp is not None and report.gp_kind == "G_p"
+    periods = np.array([p.period_s for p in report.gp])
+    true = np.abs(freqresp(analytic(preset("paper-plant1")).G_p, 2 * np.pi / periods))
+    est = np.array([p.abs for p in report.gp])
+    err = est / true - 1.0
+    print("\n|G_p| error by period [%]:", dict(zip(periods.tolist(), np.round(100 * err, 2).tolist())))
+    assert np.all(np.abs(err) <= 0.05), err
