@@ -171,7 +171,9 @@ def identify_full(
     else:
         exp = ex.zu(sig, ts_id=ts_id)
     a = assess(exp, kd=kd, t_fme_s=t_fme_s, peak_min_period_s=peak_min_period_s)
-    if method in ("zcu", "zur") and sig.Ts > SLOW_LOG_S:
+    # With a plant description, "slow" means slower than its own controller; otherwise than a 50 Hz one.
+    slow_log_s = 1.5 * plant.unit.governor.Tc if plant is not None else SLOW_LOG_S
+    if method in ("zcu", "zur") and sig.Ts > slow_log_s:
         # The process noise on the governor's speed signal reaches c and ε unfiltered; logged below the
         # controller rate it aliases into the band as input noise. Measured on paper-plant1 (12 dB):
         # 10 Hz logs, 30 min: droop −0.01 pp but max|S| +20 %, max|G_1| −30 %; 15 min: droop −0.4 pp.
