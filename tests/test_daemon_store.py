@@ -132,3 +132,19 @@ def test_retention_deletes_old_samples(tmp_path):
         assert w.flush()
     con = connect(db, readonly=True)
     assert [r[0] for r in con.execute("SELECT seq FROM samples")] == [1]
+
+
+def test_short_stale_runs_after_ok_are_covered_long_ones_are_gaps():
+    """A poller faster than the device reads one device sample twice: not lost data. A frozen device is."""
+    import numpy as np
+
+    from fcrlive.daemon.sample import Quality as Q
+    from fcrlive.daemon.store import STALE_GRACE, Window
+
+    q = np.array([Q.OK, Q.STALE, Q.OK] + [Q.STALE] * (STALE_GRACE + 2) + [Q.OK, Q.COMM_ERROR, Q.STALE, Q.OK])
+    n = q.size
+    w = Window(0.0, float(n), np.arange(float(n)), np.arange(float(n)), np.arange(n), q, {})
+    expected = [1, 1, 1] + [1] * STALE_GRACE + [0, 0] + [1, 0, 0, 1]
+    assert w.covered.astype(int).tolist() == expected
+    assert w.ok_fraction() == sum(expected) / n
+    assert len(w.gaps()) == 2  # the frozen stretch and the comm error (+ the stale read after it)

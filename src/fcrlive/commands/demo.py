@@ -7,8 +7,10 @@ SQLite store, identification in a worker process, MQTT publishing). A subscriber
 after ``--identifications`` results a summary against the simulated plant's truth.
 
 Window lengths are given in SIMULATED minutes; the daemon's wall-clock windows are these divided by the
-speed. The identification's accuracy depends on the simulated time between two samples,
-``speed/poll_hz`` (0.2 s by default): Z_u (no excitation) needs 0.1-0.2 s (docs/daemon.md).
+speed. The identification's accuracy depends on the simulated time between two samples, ``speed/poll_hz``:
+Z_cu needs every controller sample (docs/daemon.md). The demo's governor therefore runs its controller at
+``--controller-ms`` (100 ms: a 10 Hz digital governor, otherwise the paper's plant 1) and the default
+speed 4 with 50 Hz polling sees every controller sample (0.08 simulated s between polls).
 """
 
 from __future__ import annotations
@@ -24,14 +26,17 @@ EXC_ON = "ON (white noise 0.1 Hz through the safety guard, into the SIMULATED go
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--speed", type=float, default=10.0,
-                        help="simulated seconds per wall second (default 10)")
+    parser.add_argument("--speed", type=float, default=4.0,
+                        help="simulated seconds per wall second (default 4)")
+    parser.add_argument("--controller-ms", type=float, default=100.0,
+                        help="the simulated governor's controller sample time [ms] (default 100); polls "
+                             "must see every controller sample: speed/poll_hz <= this")
     parser.add_argument("--poll-hz", type=float, default=50.0,
                         help="daemon polling rate, 10-50 Hz (default 50)")
-    parser.add_argument("--window-min", type=float, default=15.0,
-                        help="identification window [simulated min] (default 15)")
-    parser.add_argument("--every-min", type=float, default=5.0,
-                        help="identification period [simulated min] (default 5)")
+    parser.add_argument("--window-min", type=float, default=10.0,
+                        help="identification window [simulated min] (default 10)")
+    parser.add_argument("--every-min", type=float, default=3.0,
+                        help="identification period [simulated min] (default 3)")
     parser.add_argument("--identifications", type=int, default=3,
                         help="stop after this many identification results (default 3)")
     parser.add_argument("--minutes", type=float, default=None,
@@ -66,6 +71,8 @@ def _check(args) -> None:
                         "daemon's smallest window (0.1 wall minutes)")
     if args.every_min <= 0 or (args.minutes is not None and args.minutes <= 0):
         raise UserError("--every-min and --minutes must be positive")
+    if not 10 <= args.controller_ms <= 200:
+        raise UserError(f"--controller-ms must be between 10 and 200, not {args.controller_ms:g}")
 
 
 def _fmt_ci(d: dict | None, scale: float = 1.0, fmt: str = "{:.2f}") -> str:
@@ -146,6 +153,7 @@ async def _demo(args) -> int:
     from fcrlive.daemon.health import setup_logging
     from fcrlive.daemon.service import Service
     from fcrlive.errors import UserError
+    from fcrlive.plant.description import load_plant
     from sim_device import SimGovernor
 
     setup_logging(args.log_level)
@@ -164,11 +172,13 @@ async def _demo(args) -> int:
                       MosquittoBroker() if args.broker == "mosquitto" else start_broker())
             await stack.enter_async_context(broker)
             host, port, broker_kind = broker.host, broker.port, broker.kind
-        gov = await stack.enter_async_context(SimGovernor(port=0, speed=args.speed, seed=args.seed))
-        truth_task = asyncio.create_task(asyncio.to_thread(gov.truth, True))
         # the simulated plant's description: Z_cu takes the controller from it (as a site's [unit] plant)
         plant_file = Path(tmp.name) / "plant.toml"
-        plant_file.write_text('preset = "paper-plant1"\n')
+        tc_s = args.controller_ms / 1e3
+        plant_file.write_text(f'preset = "paper-plant1"\n[unit.governor]\nTc = {tc_s!r}\n')
+        gov = await stack.enter_async_context(
+            SimGovernor(load_plant(plant_file), port=0, speed=args.speed, seed=args.seed))
+        truth_task = asyncio.create_task(asyncio.to_thread(gov.truth, True))
         speed = args.speed
         overrides = dict(
             unit={"name": unit, "rated_mw": gov.rated_mw, "f0": gov.f0, "kd": 0.1, "plant": str(plant_file)},

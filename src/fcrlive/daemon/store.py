@@ -39,6 +39,8 @@ log = logging.getLogger("fcrlive.store")
 
 FIXED_COLUMNS = ("t", "t_device", "seq", "run", "quality", "latency")
 SCHEMA_VERSION = 1
+STALE_GRACE = 3
+"""Consecutive STALE samples after an OK one that still count as covered (:attr:`Window.covered`)."""
 
 
 def _q(name: str) -> str:
@@ -120,21 +122,38 @@ class Window:
         return self.quality == Quality.OK
 
     @property
+    def covered(self) -> np.ndarray:
+        """Mask of samples that lose nothing: OK, or a short run of STALE right after an OK sample.
+
+        A poller faster than the device's own update rate reads the same device sample twice (STALE):
+        the data are complete, nothing is missing. A long STALE run (a frozen device) is a gap.
+        """
+        ok = self.ok
+        stale = self.quality == Quality.STALE
+        i = np.arange(self.t.size)
+        run_start = np.maximum.accumulate(np.where(stale, -1, i))  # last non-stale index at or before i
+        before_ok = np.zeros_like(ok)
+        has_prev = run_start >= 0
+        before_ok[has_prev] = ok[run_start[has_prev]]
+        return ok | (stale & before_ok & (i - run_start <= STALE_GRACE))
+
+    @property
     def period_s(self) -> float:
         """Median sampling interval [s] (NaN for fewer than 2 samples)."""
         return float(np.median(np.diff(self.t))) if self.t.size > 1 else math.nan
 
     def ok_fraction(self, expected: int | None = None) -> float:
-        """Fraction of OK samples; against ``expected`` samples when given (rows absent count as bad)."""
+        """Fraction of :attr:`covered` samples; against ``expected`` samples when given (rows absent
+        count as bad)."""
         n = expected if expected is not None else self.t.size
-        return float(np.count_nonzero(self.ok)) / n if n else 0.0
+        return float(np.count_nonzero(self.covered)) / n if n else 0.0
 
     def quality_counts(self) -> dict[str, int]:
         """Number of samples per quality name."""
         return {q.name.lower(): int(np.count_nonzero(self.quality == q)) for q in Quality}
 
     def gaps(self, max_dt: float | None = None) -> list[tuple[float, float]]:
-        """Intervals ``(start, end)`` [UNIX s] without OK samples.
+        """Intervals ``(start, end)`` [UNIX s] without :attr:`covered` samples.
 
         A gap is a run of non-OK samples, or a jump in ``t`` longer than ``max_dt`` (default 1.5×
         the median period) where no rows were stored at all (daemon down). Also covers a missing
@@ -144,7 +163,7 @@ class Window:
             return [(self.t1, self.t2)]
         max_dt = 1.5 * self.period_s if max_dt is None and self.t.size > 1 else (max_dt or math.inf)
         gaps: list[tuple[float, float]] = []
-        ok = self.ok
+        ok = self.covered
         last_ok_t = self.t1
         in_gap = self.t[0] - self.t1 > max_dt or not ok[0]
         for i in range(self.t.size):
