@@ -18,8 +18,8 @@ def _path_without_mosquitto() -> str:
 def test_demo_runs_without_mosquitto_and_prints_a_summary(tmp_path):
     env = {**os.environ, "PATH": _path_without_mosquitto(), "OPENBLAS_NUM_THREADS": "1"}
     assert shutil.which("mosquitto", path=env["PATH"]) is None
-    cmd = [sys.executable, "-m", "fcrlive.cli", "demo", "--speed", "30", "--identifications", "1", "--window-min", "15",
-           "--minutes", "3"]
+    cmd = [sys.executable, "-m", "fcrlive.cli", "demo", "--speed", "30", "--identifications", "1",
+           "--window-min", "15", "--minutes", "3"]
     p = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=240, cwd=tmp_path)
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
     out = p.stdout
