@@ -108,7 +108,7 @@ async def _until(cond, timeout: float, what: str, proc: subprocess.Popen | None 
         await asyncio.sleep(0.25)
 
 
-async def test_results_over_mqtt_survive_a_broker_outage_and_match_the_plant(tmp_path):
+async def test_results_over_mqtt_survive_a_broker_outage(tmp_path):
     """Daemon + real identification (Z_u, no excitation) at speed 15; the broker is down for > 10 s
     around the first identification: that result is delivered after the broker returns (Mosquitto
     keeps nothing across its restart, so it comes from the daemon's queue)."""
@@ -160,10 +160,9 @@ async def test_results_over_mqtt_survive_a_broker_outage_and_match_the_plant(tmp
     droop = got.get("fcrlive/G1/droop", {}).get("value")
     if droop is not None:
         assert 2.0 < droop < 20.0, f"droop {droop} % is not even plausible (truth 8 %)"
-    if droop is None or abs(droop - 8.0) > 0.5:
-        pytest.xfail(f"Z_u without excitation on a 15-min window sampled every "
-                     f"{r['sample_interval_s']:.2f} s: droop {droop} % vs 8 % "
-                     "(±0.5 pp needs excitation or faster sampling; docs/daemon.md)")
+    # The ±0.5 pp accuracy requirement is asserted by the excited test below, on controller-rate data;
+    # this outage test runs at speed 15 (0.3 simulated s between polls, no excitation), where only a
+    # plausible droop can be expected (docs/daemon.md).
 
 
 E2E_SPEED = 4.0
