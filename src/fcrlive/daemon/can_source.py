@@ -24,13 +24,12 @@ from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from fcrlive.daemon.modbus_source import SourceStats, backoff_delays
+from fcrlive.daemon.modbus_source import SourceStats, backoff_delays, paced_ticks
 from fcrlive.daemon.sample import (
     COUNTER_NAME,
     DEVICE_TIME_NAME,
     Quality,
     Sample,
-    Ticker,
     classify,
     empty_values,
 )
@@ -175,21 +174,12 @@ class CanSource:
     async def samples(self) -> AsyncIterator[Sample]:
         """One sample per tick at ``poll_hz`` from the latest complete snapshot."""
         loop = asyncio.get_running_loop()
-        ticker = Ticker(loop.time(), 1.0 / self.p.poll_hz)
         last_no = 0
         prev_counter: float | None = None
-        while True:
-            idx, skipped = ticker.advance(loop.time())
-            if skipped:
-                self.stats.missed_ticks += skipped
-                offset = time.time() - loop.time()
-                for k in range(idx - skipped, idx):
-                    self.stats.samples[Quality.MISSING] += 1
-                    yield Sample(ticker.deadline(k) + offset, math.nan, k, empty_values(self.names),
-                                 Quality.MISSING)
-            wait = ticker.deadline(idx) - loop.time()
-            if wait > 0:
-                await asyncio.sleep(wait)
+        async for idx in paced_ticks(self.p.poll_hz, self.stats, self.names):
+            if isinstance(idx, Sample):
+                yield idx
+                continue
             now = loop.time()
             self.stats.polls += 1
             if self.bus is None or not self._snapshot or now - self._snapshot_t > self.p.stale_after_s:

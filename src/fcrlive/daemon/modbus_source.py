@@ -95,6 +95,26 @@ def backoff_delays(minimum: float, maximum: float, rng: random.Random | None = N
         d = min(maximum, d * 2)
 
 
+async def paced_ticks(poll_hz: float, stats: SourceStats, names) -> AsyncIterator[int | Sample]:
+    """Ticks on absolute deadlines at ``poll_hz`` (both sources use it): for every tick that was skipped
+    because the previous one overran, a MISSING :class:`Sample` (counted in ``stats``; no catch-up
+    burst of reads), then the index of the current tick once its deadline has come: poll then."""
+    loop = asyncio.get_running_loop()
+    ticker = Ticker(loop.time(), 1.0 / poll_hz)
+    while True:
+        idx, skipped = ticker.advance(loop.time())
+        if skipped:
+            stats.missed_ticks += skipped
+            offset = time.time() - loop.time()
+            for k in range(idx - skipped, idx):
+                stats.samples[Quality.MISSING] += 1
+                yield Sample(ticker.deadline(k) + offset, math.nan, k, empty_values(names), Quality.MISSING)
+        wait = ticker.deadline(idx) - loop.time()
+        if wait > 0:
+            await asyncio.sleep(wait)
+        yield idx
+
+
 class ModbusSource:
     """Async context manager polling a Modbus TCP device.
 
@@ -216,20 +236,10 @@ class ModbusSource:
     async def samples(self) -> AsyncIterator[Sample]:
         """One sample per tick at ``poll_hz``, forever (cancel or break to stop)."""
         loop = asyncio.get_running_loop()
-        period = 1.0 / self.p.poll_hz
-        ticker = Ticker(loop.time(), period)
-        while True:
-            idx, skipped = ticker.advance(loop.time())
-            if skipped:
-                self.stats.missed_ticks += skipped
-                offset = time.time() - loop.time()
-                for k in range(idx - skipped, idx):
-                    self.stats.samples[Quality.MISSING] += 1
-                    yield Sample(ticker.deadline(k) + offset, math.nan, k, empty_values(self.names),
-                                 Quality.MISSING)
-            wait = ticker.deadline(idx) - loop.time()
-            if wait > 0:
-                await asyncio.sleep(wait)
+        async for idx in paced_ticks(self.p.poll_hz, self.stats, self.names):
+            if isinstance(idx, Sample):
+                yield idx
+                continue
             t_req = loop.time()
             values, reason = await self._read_once()
             t_wall = time.time()
