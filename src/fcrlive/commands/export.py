@@ -17,8 +17,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     src = parser.add_mutually_exclusive_group(required=True)
     src.add_argument("--config", metavar="FILE", help="daemon config: use its [store] path")
     src.add_argument("--db", metavar="FILE", help="the SQLite store directly")
-    parser.add_argument("--timestamps", choices=("grid", "arrival"), default="grid",
-                        help="grid: the poller's tick times (default); arrival: measured arrival times")
+    parser.add_argument("--timestamps", choices=("grid", "arrival", "device"), default="grid",
+                        help="grid: the poller's tick times (default); arrival: measured arrival times; "
+                             "device: the device's own clock (an accelerated simulator)")
 
 
 def parse_time(text: str, where: str) -> float:

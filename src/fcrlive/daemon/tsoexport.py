@@ -14,7 +14,8 @@ Only samples with quality OK and finite values in every written column are kept:
 gap in the file (the TSO reader finds gaps by their time stamps). Time stamps are, by default, the
 poller's scheduled tick times (``t`` snapped to the run's tick grid by ``seq``), because a TSO log is
 read as regularly sampled and arrival jitter is not information; ``timestamps="arrival"`` keeps the
-measured arrival times.
+measured arrival times; ``timestamps="device"`` uses the device's own clock (``device_time``), the
+right axis for an accelerated simulated governor.
 """
 
 from __future__ import annotations
@@ -66,8 +67,15 @@ def window_to_log(w: Window, timestamps: str = "grid"):
         cols["ApplFreqSig"] = w.signals["grid_freq"] - np.nan_to_num(exc)
         cols = {k: cols[k] for k in ("InsAcPow", "GridFreq", "ApplFreqSig", "ContOutSig", "GuideVane")
                 if k in cols}
-    t = grid_times(w) if timestamps == "grid" else w.t
-    keep = w.ok & np.all([np.isfinite(c) for c in cols.values()], axis=0)
+    if timestamps == "device":
+        # the device's own clock, anchored at the first arrival: right for an accelerated simulator,
+        # whose samples are seconds apart in device time but milliseconds apart on the wall
+        t = w.t[0] + (w.t_device - np.nanmin(w.t_device)) if np.any(np.isfinite(w.t_device)) else w.t
+    elif timestamps == "grid":
+        t = grid_times(w)
+    else:
+        t = w.t
+    keep = w.ok & np.isfinite(t) & np.all([np.isfinite(c) for c in cols.values()], axis=0)
     keep &= np.concatenate(([True], np.diff(t) > 0.0005))  # never two rows in one millisecond
     if np.count_nonzero(keep) < 2:
         raise DataError(f"only {int(np.count_nonzero(keep))} good sample(s) between the given times")
