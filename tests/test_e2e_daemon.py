@@ -210,7 +210,7 @@ async def test_excited_droop_over_mqtt_within_half_a_point_of_the_simulated_plan
                     unit_extra=f'plant = "{plant_file}"\n', extra=EXCITATION_TOML)
         log = tmp_path / "daemon.log"
         proc = _daemon(cfg, log)
-        res = None
+        res = exc_event = None
         try:
             async with aiomqtt.Client("127.0.0.1", broker.port) as c:
                 await c.subscribe("fcrlive/G1/result/latest", qos=1)
@@ -220,6 +220,12 @@ async def test_excited_droop_over_mqtt_within_half_a_point_of_the_simulated_plan
                         if msg["ok"] or not (msg["error"] or "").startswith("too little good data"):
                             res = msg
                             break
+            async with aiomqtt.Client("127.0.0.1", broker.port) as c:  # fresh: the retained state
+                await c.subscribe("fcrlive/G1/excitation", qos=1)
+                async with asyncio.timeout(30.0):
+                    async for m in c.messages:
+                        exc_event = json.loads(m.payload)
+                        break
         finally:
             rc = _stop(proc)
     assert rc == 0, log.read_text()[-2000:]
@@ -234,6 +240,9 @@ async def test_excited_droop_over_mqtt_within_half_a_point_of_the_simulated_plan
     assert r["method"] == "zcu", r["notes"]
     assert r["sample_interval_s"] <= 0.1 + 1e-6  # the controller rate: every sample seen
     assert any("r from excitation" in n for n in r["notes"]), r["notes"]
+    # every guard decision is published: the retained state says active (or inhibited, and why)
+    assert exc_event["state"] in {"active", "inhibited"}, exc_event
+    assert exc_event["state"] == "active" or exc_event["reasons"], exc_event
     assert res["quality"]["ok_fraction"] > 0.5
     assert abs(droop - droop_true) <= 0.5
     # The same stretch, exported from the store as a TSO log on the device's clock and identified off-line

@@ -66,6 +66,15 @@ class ResultPayload(_Payload):
     result: dict[str, Any] | None = Field(description="the identification plug-in's JSON (to_json())")
 
 
+class ExcitationEventPayload(_Payload):
+    """``excitation``: every change of the excitation's state, with the safety guard's reasons (retained)."""
+
+    t_wall: float = Field(description="when the state changed [UNIX s]")
+    state: str = Field(description='"active", "inhibited", "ramping", "stopped", "link_down" or "fault"')
+    reasons: list[str] = Field(description="the guard's reasons, e.g. frequency_out_of_band, holdoff")
+    detail: str = ""
+
+
 class ScalarPayload(_Payload):
     """``droop``, ``max_abs_s``, ``max_abs_g1``: one estimated number with its uncertainty (retained)."""
 
@@ -145,6 +154,8 @@ TOPICS: tuple[Topic, ...] = (
     Topic("gp", GpPayload, True, 1, "G_p(jω) at the TSO periods (key `gp`)"),
     Topic("quality", DataQuality, True, 1, "data quality of the latest analysed window"),
     Topic("live", LiveStatsPayload, False, 0, "signal statistics every stats_interval_s"),
+    Topic("excitation", ExcitationEventPayload, True, 1,
+          "excitation state changes (active / inhibited and why), when writing is enabled"),
 )
 
 

@@ -27,7 +27,14 @@ from typing import Any
 from fcrlive.daemon.config import FcrliveConfig
 from fcrlive.daemon.health import Metrics, sd_notify, watchdog_interval_s
 from fcrlive.daemon.livestats import LiveStats
-from fcrlive.daemon.payloads import DataQuality, ResultPayload, Window, iso, result_topics
+from fcrlive.daemon.payloads import (
+    DataQuality,
+    ExcitationEventPayload,
+    ResultPayload,
+    Window,
+    iso,
+    result_topics,
+)
 from fcrlive.daemon.sample import Quality
 from fcrlive.daemon.store import ResultRow, SampleWriter, connect, read_window
 
@@ -119,6 +126,12 @@ class Service:
 
     def _on_written(self, w) -> None:
         self.written_hz = float("nan") if w.written_hz is None else float(w.written_hz)
+
+    def _on_excitation_event(self, ev) -> None:
+        """Publish every change of the excitation's state (the task logs it too)."""
+        if self.publisher is not None:
+            self.publisher.publish("excitation", ExcitationEventPayload(
+                t_wall=ev.t_wall, state=ev.state, reasons=list(ev.reasons), detail=ev.detail))
 
     async def _excite(self) -> None:
         await self.excitation.run()
@@ -245,7 +258,8 @@ class Service:
 
                 # entered after the source: left before it, with a verified zero written on the way out
                 task = cfg.excitation.make_task(ModbusParams.from_config(cfg.source.modbus), f0=cfg.unit.f0,
-                                                on_written=self._on_written)
+                                                on_written=self._on_written,
+                                                on_event=self._on_excitation_event)
                 self.excitation = await stack.enter_async_context(task)
                 log.warning("excitation ON: writing %s r[n] every %g s through the safety guard",
                             cfg.excitation.generator.kind, cfg.excitation.period_s)
