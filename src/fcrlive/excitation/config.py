@@ -23,12 +23,14 @@ writing on.
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import secrets
 import time
+import typing
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, create_model, field_validator, model_validator
 
 from fcrlive.constants import F0_HZ
 from fcrlive.errors import ConfigError
@@ -69,22 +71,20 @@ class GeneratorSettings(_Section):
         return self
 
 
-class PointSettings(_Section):
-    """Register-map point names (see ``fcrlive.excitation.writer.ExcitationPoints``)."""
-
-    offset: str = "excitation_offset"
-    enable: str | None = "excitation_enable"
-    heartbeat: str = "heartbeat"
-    limit: str | None = "excitation_limit"
-    heartbeat_timeout: str | None = "heartbeat_timeout"
-    grid_freq: str = "grid_freq"
-    status: str = "status"
-    counter: str | None = "sample_counter"
-    applied: str | None = "excitation_applied"
-    fcrd: str | None = None
-
+class _PointSettingsBase(_Section):
     def to_points(self) -> ExcitationPoints:
         return ExcitationPoints(**self.model_dump())
+
+
+# The same fields and defaults as the writer's ExcitationPoints (one source of truth), validated like
+# every other section (unknown keys refused).
+_POINT_TYPES = typing.get_type_hints(ExcitationPoints)
+PointSettings = create_model(
+    "PointSettings",
+    __base__=_PointSettingsBase,
+    __doc__="Register-map point names (see ``fcrlive.excitation.writer.ExcitationPoints``).",
+    **{f.name: (_POINT_TYPES[f.name], f.default) for f in dataclasses.fields(ExcitationPoints)},
+)
 
 
 class ExcitationSettings(_Section):
