@@ -54,10 +54,18 @@ def test_json_and_auto_method(files, case, capsys):
     if case == "sine":
         assert doc["gp_kind"] == "G_req" and len(doc["gp"]) == 3
     if case in ("zcu", "zur"):
-        assert set(doc["tso"]) == {"fcrn", "fcrd"}
-        assert "pass" in doc["tso"]["fcrn"]
         assert len(doc["gp"]) == 10
         assert set(doc["droop"]) == {"value", "ci95"}
+    if case == "zcu":
+        assert set(doc["tso"]) == {"fcrn", "fcrd"}
+        assert "pass" in doc["tso"]["fcrn"]
+    if case == "zur":
+        # 15 min at 12 dB is too little for Z_ur (paper 7.3): the report must flag its bias, and it may
+        # skip the TSO checks when the identified G_p is not physical; when it runs them, all of them
+        assert any("Z_ur is biased" in w for w in doc["warnings"])
+        assert doc["tso"] is None or set(doc["tso"]) == {"fcrn", "fcrd"}
+        if doc["tso"] is None:
+            assert any("TSO checks skipped" in w for w in doc["warnings"])
 
 
 def test_text_summary_and_plots(files, tmp_path, capsys):

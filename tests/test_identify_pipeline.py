@@ -103,20 +103,31 @@ def test_zcu_accuracy_more_seeds(zcu_seeds, truth):
         assert _within(r.max_abs_g1.value, r.max_abs_g1.ci95, truth["max_g1"], 0.05)
 
 
-@pytest.mark.xfail(strict=False, reason="Z_ur output-error loop form y ← (ε, u) fails even noise-free (y is "
-                   "a small difference of two large terms; ε reacts inside one step and carries v, which the "
-                   "causal decimation filter smears over ~1 s). Seeds 0-2 with the peak band (T ≥ 4 s): "
-                   "droop n.a. / −8.0 pp / n.a., max|G_1| −81/−85/−99 %, max|S| +1046/+442/+1972 %. A MISO "
-                   "BJ(4) ε ← (u, r) at 0.5 s: droop −0.08/−0.01/−0.04 pp, max|G_1| −11.6/+0.4/+2.8 % but "
-                   "max|S| +21.5/+14.2/+15.3 % at 0.62 rad/s (true peak at 0.29), truth outside the "
-                   "intervals, 0.7-1.8 s per fit; at 1 s max|S| +28..+73 %")
-def test_zur_accuracy(excited, truth):
+def test_zur_at_12db_droop_and_bias_warning(excited, truth):
+    # the paper's finding (Remark 7, Section 7.3): Z_ur is biased by the process noise reaching u. The
+    # droop still comes out right; S does not (measured seeds 0-4: max|S| +6..+26 % near 0.6 rad/s,
+    # docs/identify.md), so the report must say so rather than present S as trustworthy
     sig = replace(excited, c=None, a=None)
     r = identify_full(sig, rated_mw=300.0, kd=KD).report
     assert r.method == "zur"
     assert abs(r.droop.value - truth["droop"]) <= 0.002
-    assert _within(r.max_abs_s.value, r.max_abs_s.ci95, truth["max_s"], 0.05)
-    assert _within(r.max_abs_g1.value, r.max_abs_g1.ci95, truth["max_g1"], 0.05)
+    assert abs(r.max_abs_g1.value / truth["max_g1"] - 1.0) <= 0.15
+    assert r.max_abs_s is not None and r.gp is not None
+    assert any("Z_ur is biased" in w for w in r.warnings)
+
+
+@pytest.mark.parametrize("seed", (0, 1))
+def test_zur_accuracy_low_process_noise(truth, seed):
+    # with little process noise the bias vanishes: the direct MISO model is then accurate and its
+    # intervals cover the truth (measured seeds 0/1 at 30 dB: max|S| +0.8/+0.1 %, max|G_1| −0.8/+0.3 %)
+    res = simulate(PLANT, SimConfig(duration_s=1800, snr_db=30.0, excitation=True, seed=seed))
+    sig = replace(plant_signals(log_from_sim(res), rated_mw=300.0), c=None, a=None)
+    r = identify_full(sig, rated_mw=300.0, kd=KD).report
+    assert r.method == "zur"
+    assert abs(r.droop.value - truth["droop"]) <= 0.002
+    assert r.droop.ci95[0] <= truth["droop"] <= r.droop.ci95[1]
+    assert _within(r.max_abs_s.value, r.max_abs_s.ci95, truth["max_s"], 0.03)
+    assert _within(r.max_abs_g1.value, r.max_abs_g1.ci95, truth["max_g1"], 0.03)
 
 
 def test_zur_picked_without_c_a(excited):
