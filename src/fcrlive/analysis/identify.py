@@ -175,12 +175,17 @@ def identify_full(
     slow_log_s = 1.5 * plant.unit.governor.Tc if plant is not None else SLOW_LOG_S
     if method in ("zcu", "zur") and sig.Ts > slow_log_s:
         # The process noise on the governor's speed signal reaches c and ε unfiltered; logged below the
-        # controller rate it aliases into the band as input noise. Measured on paper-plant1 (12 dB):
-        # 10 Hz logs, 30 min: droop −0.01 pp but max|S| +20 %, max|G_1| −30 %; 15 min: droop −0.4 pp.
+        # controller rate it aliases into the band as input noise (errors in variables), and the
+        # controller's difference equation no longer holds per log sample. Measured on paper-plant1
+        # (12 dB, 30 min, 10 Hz logs, seeds 0/1): droop +0.74/−0.94 pp with the identified controller,
+        # −0.33/−0.00 pp with the plant description; max|S| −10 … +20 %, max|G_1| −30 … −57 %. Tried and
+        # not enough: instrumental variables and windowed sums for the controller, the gate position
+        # instead of c as input (max|S| still +13..+18 %); docs/identify.md.
         extra.append(
             f"log sampled every {sig.Ts * 1e3:.0f} ms, slower than a governor's controller rate: "
-            "max|S|, max|G_1|, G_p and, on short logs, the droop from this method are biased (log at "
-            "the controller rate, e.g. 20 ms, for the peaks and the TSO checks)"
+            "the droop, max|S|, max|G_1| and G_p from this method are biased, by up to about 1 percentage "
+            "point of droop on the paper's plant (log at the controller rate, e.g. 20 ms, or give the "
+            "plant description)"
         )
     if kd == 0.0:
         extra.append("Kd = 0 assumed: the droop shown is 1/(1/G_1(0)), i.e. including the speed damping")
