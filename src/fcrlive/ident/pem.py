@@ -98,9 +98,31 @@ def _max_root(p: np.ndarray) -> float:
     return float(np.max(np.abs(np.roots(p))))
 
 
+def _roots_inside(p: np.ndarray, radius: float) -> bool:
+    """True when every root of p (highest power first, p[0] ≠ 0) has modulus < ``radius``.
+
+    Schur-Cohn step-down recursion on the polynomial scaled to the unit circle: O(n²) scalar work with
+    no eigenvalue problem. The search asks this a thousand times per fit, and np.roots was a quarter of
+    the time of a Z_u identification.
+    """
+    n = p.size - 1
+    if n <= 0:
+        return True
+    a = np.asarray(p, float) / (radius ** np.arange(n + 1))
+    if not np.all(np.isfinite(a)):
+        return False
+    a = a / a[0]
+    for m in range(n, 0, -1):
+        k = a[m]
+        if not abs(k) < 1.0:
+            return False
+        a = (a[:m] - k * a[m:0:-1]) / (1.0 - k * k)
+    return True
+
+
 def _stable(st: _Struct, th: np.ndarray) -> bool:
     _, F, C, D = st.polys(th)
-    return all(_max_root(p) < _ROOT_MAX for p in (*F, C, D))
+    return all(_roots_inside(p, _ROOT_MAX) for p in (*F, C, D))
 
 
 def _reflect(p: np.ndarray, shrink: float = 0.98) -> np.ndarray:
@@ -198,18 +220,30 @@ def _ic_basis(st: _Struct, F, C, D, L: int) -> np.ndarray:
         m = min(max(st.nf[i], st.nk[i] + st.nb[i] - 1), L)
         if m == 0:
             continue
-        imp = np.zeros((L, m))
-        imp[np.arange(m), np.arange(m)] = 1.0
-        x = sps.lfilter([1.0], F[i], imp, axis=0)
+        h = sps.lfilter([1.0], F[i], _unit_impulse(L))
         if noise:
-            x = sps.lfilter(D, C, x, axis=0)
-        cols.append(x)
+            h = sps.lfilter(D, C, h)
+        cols.append(_shifted_copies(h, m))
     mc = min(max(st.nc, st.nd), L)
     if mc:
-        imp = np.zeros((L, mc))
-        imp[np.arange(mc), np.arange(mc)] = 1.0
-        cols.append(sps.lfilter([1.0], C, imp, axis=0))
+        cols.append(_shifted_copies(sps.lfilter([1.0], C, _unit_impulse(L)), mc))
     return np.column_stack(cols)
+
+
+def _unit_impulse(L: int) -> np.ndarray:
+    x = np.zeros(L)
+    x[0] = 1.0
+    return x
+
+
+def _shifted_copies(h: np.ndarray, m: int) -> np.ndarray:
+    """Columns h delayed by 0 .. m−1 samples: the responses to impulses at t = 0 .. m−1 of a filter
+    starting from rest, got from ONE filtering instead of m (this basis is rebuilt at every step)."""
+    L = h.size
+    out = np.zeros((L, m))
+    for j in range(m):
+        out[j:, j] = h[:L - j]
+    return out
 
 
 def _project_ic(st: _Struct, F, C, D, eps: np.ndarray, J: np.ndarray | None) -> None:
