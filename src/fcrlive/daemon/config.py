@@ -204,6 +204,26 @@ class StoreConfig(_Section):
     commit_interval_s: float = Field(1.0, gt=0, le=1, description="longest time between commits [s]")
 
 
+class ResultQualityConfig(_Section):
+    """The quality rule on identification results (docs/daemon.md, "Result quality")."""
+
+    droop_min_pct: float = Field(1.0, ge=0, le=100, description="lowest plausible droop [%]; below: rejected")
+    droop_max_pct: float = Field(20.0, gt=0, le=100,
+                                 description="highest plausible droop [%]; above: rejected")
+    uncertain_ci_rel_width: float = Field(
+        0.25, gt=0, description="95 % interval width relative to the value above which a number is uncertain")
+    reject_ci_rel_width: float = Field(
+        1.0, gt=0, description="95 % interval width relative to the value above which a number is rejected")
+
+    @model_validator(mode="after")
+    def _check(self) -> ResultQualityConfig:
+        if self.droop_min_pct >= self.droop_max_pct:
+            raise ValueError("droop_min_pct must be below droop_max_pct")
+        if self.uncertain_ci_rel_width > self.reject_ci_rel_width:
+            raise ValueError("uncertain_ci_rel_width must not exceed reject_ci_rel_width")
+        return self
+
+
 class IdentificationConfig(_Section):
     """Periodic re-identification in a worker process."""
 
@@ -218,6 +238,7 @@ class IdentificationConfig(_Section):
     )
     min_ok_fraction: float = Field(0.8, ge=0, le=1, description="skip windows with fewer good samples")
     timeout_s: float = Field(600.0, gt=0, description="abandon an identification after this [s]")
+    result_quality: ResultQualityConfig = ResultQualityConfig()
 
 
 class TlsConfig(_Section):
@@ -492,6 +513,10 @@ def summary(cfg: FcrliveConfig) -> str:
     i = cfg.identification
     lines.append(f"identification {'on' if i.enabled else 'off'}: every {i.every_min:g} min, window "
                  f"{i.window_min:g} min, method {i.method}, {i.function}")
+    rq = i.result_quality
+    lines.append(f"result quality: droop {rq.droop_min_pct:g}-{rq.droop_max_pct:g} %, 95 % interval up to "
+                 f"{rq.uncertain_ci_rel_width:g}x the value ok, up to {rq.reject_ci_rel_width:g}x uncertain, "
+                 "wider rejected")
     q = cfg.mqtt
     if q.enabled:
         auth = "password file" if q.password_file else "password" if q.password else "anonymous"
@@ -512,7 +537,8 @@ def summary(cfg: FcrliveConfig) -> str:
 _SECTIONS: tuple[tuple[str, type[BaseModel]], ...] = (
     ("unit", UnitConfig), ("source", SourceConfig), ("source.modbus", ModbusConfig),
     ("source.modbus.points[]", PointModel), ("source.can", CanConfig), ("store", StoreConfig),
-    ("identification", IdentificationConfig), ("mqtt", MqttConfig), ("mqtt.tls", TlsConfig),
+    ("identification", IdentificationConfig), ("identification.result_quality", ResultQualityConfig),
+    ("mqtt", MqttConfig), ("mqtt.tls", TlsConfig),
     ("metrics", MetricsConfig), ("excitation", ExcitationConfig),
 )
 
