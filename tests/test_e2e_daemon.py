@@ -140,7 +140,9 @@ async def test_results_over_mqtt_survive_a_broker_outage(tmp_path):
                     if str(m.topic) != "fcrlive/G1/status":
                         got[str(m.topic)] = json.loads(m.payload)
                     res = got.get("fcrlive/G1/result/latest")
-                    if res and "fcrlive/G1/tso/fcrn" in got and "fcrlive/G1/quality" in got:
+                    # a result the quality rule rejects publishes no headline topics (docs/daemon.md)
+                    if res and "fcrlive/G1/quality" in got and "fcrlive/G1/result_quality" in got and (
+                            "fcrlive/G1/tso/fcrn" in got or res["result_quality"]["level"] == "rejected"):
                         break
         finally:
             rc = _stop(proc)
@@ -150,11 +152,19 @@ async def test_results_over_mqtt_survive_a_broker_outage(tmp_path):
     assert res["ok"], res["error"]
     r = res["result"]
     assert r["method"] == "zu" and r["schema_version"] == 1
-    assert got["fcrlive/G1/tso/fcrn"]["verdict"] == "unknown"  # no excitation: G_p not identifiable
+    verdict = got["fcrlive/G1/result_quality"]
+    assert verdict["level"] == res["result_quality"]["level"]
+    assert verdict["window_end"] == res["window"]["end"]
+    if verdict["level"] == "rejected":
+        assert verdict["reasons"] and "fcrlive/G1/droop" not in got and "fcrlive/G1/tso/fcrn" not in got
+    else:
+        assert got["fcrlive/G1/tso/fcrn"]["verdict"] == "unknown"  # no excitation: G_p not identifiable
     assert got["fcrlive/G1/quality"]["ok_fraction"] > 0.8
     assert abs(r["sample_interval_s"] - speed / 50.0) < 0.1
     con = connect(db, readonly=True)
     assert read_results(con)[-1].result["method"] == "zu"
+    [stored] = [x for x in read_results(con) if x.t == res["t"]]
+    assert stored.result_quality == res["result_quality"]
     assert read_runs(con)[-1]["clean"] == 1
     con.close()
     droop = got.get("fcrlive/G1/droop", {}).get("value")

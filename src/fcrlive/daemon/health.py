@@ -92,9 +92,13 @@ class Metrics:
             buckets=(0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30, 60, 120, 300))
         self.ident_runs = Counter("fcrlive_identification_runs", "Identification runs by outcome",
                                   ["outcome"], registry=r)
+        self.result_levels = Counter("fcrlive_identification_results",
+                                     "Identification results by quality level (ok, uncertain, rejected)",
+                                     ["level"], registry=r)
         self.last_result_time = Gauge("fcrlive_last_result_timestamp_seconds",
-                                      "UNIX time of the last successful result", registry=r)
-        self.result_age = Gauge("fcrlive_last_result_age_seconds", "Age of the last successful result [s]",
+                                      "UNIX time of the last result not rejected (headline topics updated)",
+                                      registry=r)
+        self.result_age = Gauge("fcrlive_last_result_age_seconds", "Age of the last result not rejected [s]",
                                 registry=r)
         self.result_age.set_function(
             lambda: time.time() - self._last_result if self._last_result else float("nan"))
@@ -105,6 +109,8 @@ class Metrics:
         self._last_result = 0.0
         for q in Quality:
             self.samples.labels(q.name.lower())
+        for level in ("ok", "uncertain", "rejected"):
+            self.result_levels.labels(level)
 
     def observe_sample(self, s: Sample) -> None:
         """Count one sample (and its poll latency when a read was made)."""
@@ -115,7 +121,7 @@ class Metrics:
             self.poll_latency.observe(s.latency_s)
 
     def result_published(self, t: float) -> None:
-        """Record the time of the latest successful result [UNIX s]."""
+        """Record the time of the latest result that updated the headline topics [UNIX s]."""
         self._last_result = t
         self.last_result_time.set(t)
 

@@ -69,6 +69,7 @@ def discovery_configs(prefix: str, unit: str, discovery_prefix: str = "homeassis
         "ok_fraction": (f"{prefix}/quality", "{{ (value_json.ok_fraction * 100) | round(1) }}", "%",
                         "Data quality"),
         "max_abs_g1": (f"{prefix}/max_abs_g1", "{{ value_json.value }}", None, "Peak max|G_1|"),
+        "result_quality": (f"{prefix}/result_quality", "{{ value_json.level }}", None, "Result quality"),
         "tso_fcrn": (f"{prefix}/tso/fcrn", "{{ value_json.verdict }}", None, "FCR-N verdict"),
         "tso_fcrd": (f"{prefix}/tso/fcrd", "{{ value_json.verdict }}", None, "FCR-D verdict"),
     }

@@ -51,6 +51,34 @@ class DataQuality(_Payload):
     gap_s: float = Field(ge=0, description="total length of those stretches [s]")
 
 
+QualityLevel = Literal["ok", "uncertain", "rejected"]
+
+
+class QuantityQuality(_Payload):
+    """The quality rule's verdict on one published number (docs/daemon.md, "Result quality")."""
+
+    level: QualityLevel = Field(description='"ok", "uncertain" (interval wide) or "rejected"')
+    reasons: list[str] = Field(default_factory=list, description="why not ok, one line each")
+
+
+class ResultQuality(_Payload):
+    """The quality rule's verdict on one identification run: the worst of its numbers' levels."""
+
+    level: QualityLevel = Field(description='"ok", "uncertain" or "rejected" (the headline topics keep '
+                                            'their previous values)')
+    reasons: list[str] = Field(default_factory=list,
+                               description='why not ok, "<key>: ..." per number; the error of a failed run')
+    quantities: dict[str, QuantityQuality] = Field(
+        default_factory=dict, description="the verdict per judged number (droop, max_abs_s, max_abs_g1)")
+
+
+class ResultQualityPayload(ResultQuality):
+    """``result_quality``: the quality verdict of the latest identification run (retained)."""
+
+    t: float = Field(description="when the run finished [UNIX s]")
+    window_end: float = Field(description="end of the data window [UNIX s]")
+
+
 class ResultPayload(_Payload):
     """``result/latest``: the whole outcome of one identification run (retained)."""
 
@@ -64,6 +92,8 @@ class ResultPayload(_Payload):
     duration_s: float = Field(description="wall time of the identification [s]")
     quality: DataQuality
     result: dict[str, Any] | None = Field(description="the identification plug-in's JSON (to_json())")
+    result_quality: ResultQuality | None = Field(
+        None, description="the quality rule's verdict; rejected also for a skipped or failed run")
 
 
 class ExcitationEventPayload(_Payload):
@@ -85,6 +115,7 @@ class ScalarPayload(_Payload):
     ci95: list[float | None] | None = Field(None, description="95 % interval [lo, hi] (same unit)")
     omega: float | None = Field(None, description="for peaks: ω of the maximum [rad/s]")
     unit: str = ""
+    quality: QuantityQuality | None = Field(None, description="the quality rule's verdict on this number")
 
 
 class TsoVerdictPayload(_Payload):
@@ -153,6 +184,8 @@ TOPICS: tuple[Topic, ...] = (
     Topic("tso/fcrd_down", TsoVerdictPayload, True, 1, "FCR-D downwards verdict (key `tso.fcrd_down`)"),
     Topic("gp", GpPayload, True, 1, "G_p(jω) at the TSO periods (key `gp`)"),
     Topic("quality", DataQuality, True, 1, "data quality of the latest analysed window"),
+    Topic("result_quality", ResultQualityPayload, True, 1,
+          "quality verdict of the latest run: ok / uncertain / rejected and why"),
     Topic("live", LiveStatsPayload, False, 0, "signal statistics every stats_interval_s"),
     Topic("excitation", ExcitationEventPayload, True, 1,
           "excitation state changes (active / inhibited and why), when writing is enabled"),
@@ -189,23 +222,45 @@ def _scalar(x: Any, t: float, t2: float, unit: str, percent: bool = False) -> Sc
 TSO_PRODUCTS = ("fcrn", "fcrd", "fcrd_up", "fcrd_down")
 
 
+HEADLINE_SCALARS = ("droop", "max_abs_s", "max_abs_g1")
+
+
+def headline_scalars(r: dict[str, Any], t: float = 0.0, t2: float = 0.0) -> dict[str, ScalarPayload]:
+    """``droop`` [%], ``max_abs_s`` and ``max_abs_g1`` of a plug-in's JSON as they are published; keys
+    that are absent or null are left out."""
+    out: dict[str, ScalarPayload] = {}
+    for key in HEADLINE_SCALARS:
+        droop = key == "droop"
+        if key in r and (p := _scalar(r[key], t, t2, "%" if droop else "", percent=droop)):
+            out[key] = p
+    return out
+
+
 def result_topics(res: ResultPayload) -> dict[str, BaseModel]:
-    """Split a result into its topics: ``result/latest``, ``quality`` and, when the plug-in's JSON
-    has them, ``droop``, ``max_abs_s``, ``max_abs_g1``, ``tso/<product>``, ``gp``. Unknown keys stay in
-    ``result/latest`` only; missing keys publish nothing (the previous retained value stays).
+    """Split a result into its topics: ``result/latest``, ``quality``, ``result_quality`` (when judged)
+    and, when the plug-in's JSON has them, ``droop``, ``max_abs_s``, ``max_abs_g1``, ``tso/<product>``,
+    ``gp``. Unknown keys stay in ``result/latest`` only; missing keys publish nothing (the previous
+    retained value stays).
+
+    A failed run or one whose ``result_quality`` is ``rejected`` publishes none of the headline topics
+    (droop ... gp): a dashboard keeps showing the last acceptable values, each with its ``window_end``,
+    and reads why from ``result_quality``. Each published number carries its own verdict in ``quality``.
 
     Both the simple form (``droop: {value, std, unit}``, ``tso: {fcrn: bool}``, ``gp: {periods_s, ...}``)
     and the identification report of :mod:`fcrlive.analysis.report` are understood (droop as a
     fraction with ``ci95`` → %, ``gp`` as a list of periods, ``tso: null`` when G_p was not
     identifiable → ``unknown`` verdicts for FCR-N and FCR-D)."""
     out: dict[str, BaseModel] = {"result/latest": res, "quality": res.quality}
-    r = res.result or {}
     t, t2 = res.t, res.window.end
-    if "droop" in r and (p := _scalar(r["droop"], t, t2, "%", percent=True)):
-        out["droop"] = p
-    for key in ("max_abs_s", "max_abs_g1"):
-        if key in r and (p := _scalar(r[key], t, t2, "")):
-            out[key] = p
+    rq = res.result_quality
+    if rq is not None:
+        out["result_quality"] = ResultQualityPayload(t=t, window_end=t2, **rq.model_dump())
+    if not res.ok or (rq is not None and rq.level == "rejected"):
+        return out
+    r = res.result or {}
+    for key, p in headline_scalars(r, t, t2).items():
+        out[key] = p if rq is None or key not in rq.quantities else \
+            p.model_copy(update={"quality": rq.quantities[key]})
     tso = r.get("tso")
     if "tso" in r and tso is None:
         why = next((w for w in r.get("warnings") or [] if "G_p" in w or "excitation" in w),
@@ -294,13 +349,26 @@ def render_docs() -> str:
         "The default plug-in (`fcrlive.daemon.identify_plugin:identify_window`) returns the identification",
         "report of `fcrlive identify --json` (docs/identify.md) plus `sample_interval_s` and `segments`.",
         "",
+        "## Result quality",
+        "",
+        "Every run is judged by the daemon's quality rule (docs/daemon.md, thresholds in",
+        "`[identification.result_quality]`): `ok`, `uncertain` (a 95 % interval wider than",
+        "`uncertain_ci_rel_width` × |value|) or `rejected` (droop not identifiable or outside the plausible",
+        "range, an interval that is not finite, empty or does not contain its value, or wider than",
+        "`reject_ci_rel_width` × |value|; also every skipped or failed run). The verdict is in",
+        "`result/latest.result_quality` and on the retained `result_quality` topic, with one reason per",
+        "line. A **rejected** run is published only there (and on `quality`): the headline topics `droop`,",
+        "`max_abs_s`, `max_abs_g1`, `tso/*` and `gp` keep the last accepted values (their `window_end` says",
+        "from when). An `uncertain` run updates them, and each number carries its own verdict in `quality`",
+        "(`{level, reasons}`), so a dashboard can grey it out.",
+        "",
         "## Home Assistant discovery",
         "",
         "With `[mqtt] homeassistant_discovery = true` the daemon publishes retained sensor configs to",
         "`<discovery_prefix>/sensor/fcrlive_<unit>_<key>/config` (droop, max_abs_s, max_abs_g1, data",
-        "quality, live power and frequency, FCR-N/FCR-D verdicts), with `availability_topic` = the status",
-        "topic, and announces them again whenever `<discovery_prefix>/status` says `online` (Home Assistant",
-        "restarted).",
+        "quality, result quality, live power and frequency, FCR-N/FCR-D verdicts), with",
+        "`availability_topic` = the status topic, and announces them again whenever",
+        "`<discovery_prefix>/status` says `online` (Home Assistant restarted).",
         "",
         "## JSON Schemas",
         "",

@@ -6,7 +6,9 @@ asyncio layer only moves data and schedules work:
 * sampler: every sample goes to the store writer queue, the metrics and the live statistics;
 * every ``stats_interval_s``: ``live`` statistics to MQTT, gauges refreshed;
 * every ``every_min``: the last ``window_min`` of samples is read back (in a thread), judged for
-  data quality, identified in the worker process, stored as JSON and published (retained);
+  data quality, identified in the worker process, judged by the result-quality rule
+  (:mod:`fcrlive.daemon.result_quality`), stored as JSON and published (retained; a rejected result
+  only on ``result/latest`` and ``result_quality``);
 * systemd: READY=1 once running, WATCHDOG=1 only while samples keep flowing (a stuck sampler lets
   systemd restart us), STOPPING=1 on the way out.
 
@@ -35,6 +37,7 @@ from fcrlive.daemon.payloads import (
     iso,
     result_topics,
 )
+from fcrlive.daemon.result_quality import failed, judge
 from fcrlive.daemon.sample import Quality
 from fcrlive.daemon.store import ResultRow, SampleWriter, connect, read_window
 
@@ -183,21 +186,27 @@ class Service:
             dt = time.monotonic() - t0
             self.metrics.ident_duration.observe(dt)
         t = time.time()
+        verdict = failed(error) if error is not None else judge(result, ic.result_quality)
         payload = ResultPayload(unit=self.cfg.unit.name, t=t, t_iso=iso(t), window=Window.of(t1, t2),
                                 method=ic.method, ok=error is None, error=error, duration_s=dt,
-                                quality=quality, result=result)
+                                quality=quality, result=result, result_quality=verdict)
         self.writer.add_result(ResultRow(t=t, t1=t1, t2=t2, method=ic.method,
                                          ok_fraction=quality.ok_fraction, quality=quality.model_dump(),
-                                         result=result, duration_s=dt, error=error))
+                                         result=result, duration_s=dt, error=error,
+                                         result_quality=verdict.model_dump()))
         if result is not None:
-            self.metrics.result_published(t)
+            self.metrics.result_levels.labels(verdict.level).inc()
+            if verdict.level != "rejected":
+                self.metrics.result_published(t)
             self.results += 1
         if self.publisher is not None:
-            for topic, p in (result_topics(payload) if error is None else
-                             {"result/latest": payload, "quality": quality}).items():
+            for topic, p in result_topics(payload).items():
                 self.publisher.publish(topic, p)
         log.info("identification ok=%s ok_fraction=%.3f duration_s=%.2f error=%r", error is None,
                  quality.ok_fraction, dt, error)
+        if result is not None and verdict.level != "ok":
+            log.warning("identification result %s, headline topics %s: %s", verdict.level,
+                        "kept" if verdict.level == "rejected" else "updated", "; ".join(verdict.reasons))
         return payload
 
     def _read(self, t1: float, t2: float):

@@ -4,8 +4,9 @@ Layout (one file, WAL mode so readers never block the writer):
 
 * ``samples(t, t_device, seq, run, quality, latency, <one REAL column per signal>)`` with an index
   on ``t`` [UNIX s]; NaN values are stored as NULL and read back as NaN.
-* ``results(id, t, t1, t2, method, ok_fraction, quality, result, duration_s, error)``: one row per
-  identification run; ``quality`` and ``result`` are JSON text.
+* ``results(id, t, t1, t2, method, ok_fraction, quality, result, duration_s, error, result_quality)``:
+  one row per identification run; ``quality``, ``result`` and ``result_quality`` (the quality rule's
+  verdict, docs/daemon.md; added to older stores on open) are JSON text.
 * ``runs(id, started, stopped, last_seen, pid, version, clean, info)``: one row per daemon start, so
   a restart after a crash (``clean = 0``) is visible.
 
@@ -81,10 +82,16 @@ def ensure_schema(con: sqlite3.Connection, signals: Sequence[str]) -> None:
             " t2 REAL NOT NULL, method TEXT, ok_fraction REAL, quality TEXT, result TEXT, duration_s REAL,"
             " error TEXT)")
         con.execute("CREATE INDEX IF NOT EXISTS results_t ON results(t)")
-        have = {r[1] for r in con.execute("PRAGMA table_info(samples)")}
+        if "result_quality" not in _columns(con, "results"):
+            con.execute("ALTER TABLE results ADD COLUMN result_quality TEXT")
+        have = _columns(con, "samples")
         for s in signals:
             if s not in have:
                 con.execute(f"ALTER TABLE samples ADD COLUMN {_q(s)} REAL")
+
+
+def _columns(con: sqlite3.Connection, table: str) -> set[str]:
+    return {r[1] for r in con.execute(f"PRAGMA table_info({table})")}
 
 
 def signal_columns(con: sqlite3.Connection) -> tuple[str, ...]:
@@ -214,15 +221,19 @@ class StoredResult:
     result: dict | None
     duration_s: float
     error: str | None
+    result_quality: dict | None = None
 
 
 def read_results(con: sqlite3.Connection, since: float = 0.0, limit: int = 100) -> list[StoredResult]:
     """Results with ``t ≥ since``, newest first."""
+    # a read-only reader may meet a store written before result_quality existed
+    rq = "result_quality" if "result_quality" in _columns(con, "results") else "NULL"
     rows = con.execute(
-        "SELECT id, t, t1, t2, method, ok_fraction, quality, result, duration_s, error FROM results "
+        f"SELECT id, t, t1, t2, method, ok_fraction, quality, result, duration_s, error, {rq} FROM results "
         "WHERE t >= ? ORDER BY t DESC LIMIT ?", (since, limit)).fetchall()
     return [StoredResult(r[0], r[1], r[2], r[3], r[4], r[5], json.loads(r[6] or "{}"),
-                         json.loads(r[7]) if r[7] else None, r[8], r[9]) for r in rows]
+                         json.loads(r[7]) if r[7] else None, r[8], r[9],
+                         json.loads(r[10]) if r[10] else None) for r in rows]
 
 
 def read_runs(con: sqlite3.Connection) -> list[dict[str, Any]]:
@@ -254,6 +265,7 @@ class ResultRow:
     result: Any
     duration_s: float
     error: str | None = None
+    result_quality: dict | None = None
 
 
 class SampleWriter:
@@ -397,12 +409,13 @@ class SampleWriter:
                 con.executemany(self._insert, rows)
             for r in results:
                 con.execute(
-                    "INSERT INTO results(t, t1, t2, method, ok_fraction, quality, result, duration_s, error)"
-                    " VALUES (?,?,?,?,?,?,?,?,?)",
+                    "INSERT INTO results(t, t1, t2, method, ok_fraction, quality, result, duration_s, error,"
+                    " result_quality) VALUES (?,?,?,?,?,?,?,?,?,?)",
                     (r.t, r.t1, r.t2, r.method, r.ok_fraction, json.dumps(r.quality),
                      None if r.result is None else (r.result if isinstance(r.result, str)
                                                     else json.dumps(r.result)),
-                     r.duration_s, r.error))
+                     r.duration_s, r.error,
+                     None if r.result_quality is None else json.dumps(r.result_quality)))
             if clean:
                 con.execute("UPDATE runs SET last_seen=?, stopped=?, clean=1 WHERE id=?",
                             (wall, wall, self.run_id))
