@@ -91,8 +91,14 @@ def _verdict(tso: dict | None, key: str) -> str:
     return "PASS" if tso[key].get("pass", tso[key].get("passed")) else "FAIL"
 
 
+def _level(msg: dict) -> str:
+    """The quality rule's level of a ``result/latest`` payload ("ok" for daemons without the rule)."""
+    return (msg.get("result_quality") or {}).get("level", "ok")
+
+
 def result_line(n: int, msg: dict, speed: float) -> str:
-    """One terminal line for a ``result/latest`` payload."""
+    """One terminal line for a ``result/latest`` payload: a rejected result shows why, never its numbers
+    (the daemon keeps them off the headline topics too); uncertain numbers are marked."""
     q = msg["quality"]
     w = msg["window"]
     head = (f"#{n} {(w['end'] - w['start']) * speed / 60:.1f} sim-min window, data ok "
@@ -100,24 +106,39 @@ def result_line(n: int, msg: dict, speed: float) -> str:
     if not msg["ok"]:
         return f"{head}: no result: {msg['error']}"
     r = msg["result"] or {}
-    return (f"{head}, method {r.get('method')}: droop {_fmt_ci(r.get('droop'), 100.0)} %, "
-            f"max|S| {_fmt_ci(r.get('max_abs_s'))}, max|G_1| {_fmt_ci(r.get('max_abs_g1'))}, "
-            f"FCR-N {_verdict(r.get('tso'), 'fcrn')}, FCR-D {_verdict(r.get('tso'), 'fcrd')} "
-            f"({msg['duration_s']:.1f} s)")
+    rq = msg.get("result_quality") or {}
+    if _level(msg) == "rejected":
+        return (f"{head}, method {r.get('method')}: result REJECTED, headline values kept: "
+                f"{'; '.join(rq.get('reasons') or [])} ({msg['duration_s']:.1f} s)")
+    per = rq.get("quantities") or {}
+
+    def mark(key: str) -> str:
+        return " (uncertain)" if (per.get(key) or {}).get("level") == "uncertain" else ""
+
+    return (f"{head}, method {r.get('method')}: droop {_fmt_ci(r.get('droop'), 100.0)} %{mark('droop')}, "
+            f"max|S| {_fmt_ci(r.get('max_abs_s'))}{mark('max_abs_s')}, "
+            f"max|G_1| {_fmt_ci(r.get('max_abs_g1'))}{mark('max_abs_g1')}, "
+            f"FCR-N {_verdict(r.get('tso'), 'fcrn')}, FCR-D {_verdict(r.get('tso'), 'fcrd')}, "
+            f"result {_level(msg)} ({msg['duration_s']:.1f} s)")
 
 
 def summary_lines(results: list[dict], truth: dict, kd: float, wall_s: float, speed: float) -> list[str]:
-    """The closing summary against the simulated plant's truth."""
-    ok = [m["result"] for m in results if m["ok"] and m["result"]]
+    """The closing summary against the simulated plant's truth (rejected results left out)."""
+    done = [m for m in results if m["ok"] and m["result"]]
+    ok = [m["result"] for m in done if _level(m) != "rejected"]
+    levels = [_level(m) for m in done]
     droop_true = 1.0 / (1.0 / truth["g1_static"] - kd) if truth.get("g1_static") else truth.get("droop")
-    lines = [f"demo summary: {len(results)} identification(s), {len(ok)} with a result, in {wall_s:.0f} s "
+    lines = [f"demo summary: {len(results)} identification(s), {len(done)} with a result "
+             f"({levels.count('ok')} ok, {levels.count('uncertain')} uncertain, "
+             f"{levels.count('rejected')} rejected by the quality rule), in {wall_s:.0f} s "
              f"wall ({wall_s * speed / 60:.0f} simulated min at speed {speed:g})"]
 
     def row(name: str, true: float | None, key: str, scale: float, unit: str) -> str:
         vals = [r[key]["value"] * scale for r in ok if r.get(key) and r[key].get("value") is not None]
         t = "?" if true is None else f"{true * scale:.3g}{unit}"
         if not vals:
-            return f"  {name:<9} truth {t:<8} estimates: none (not identifiable from this data)"
+            why = "all rejected by the quality rule" if done and not ok else "not identifiable from this data"
+            return f"  {name:<9} truth {t:<8} estimates: none ({why})"
         mean = sum(vals) / len(vals)
         err = "" if true is None else f", error of the mean {mean - true * scale:+.2f}{unit}"
         return (f"  {name:<9} truth {t:<8} estimates {', '.join(f'{v:.3g}' for v in vals)}{unit}"
@@ -126,12 +147,12 @@ def summary_lines(results: list[dict], truth: dict, kd: float, wall_s: float, sp
     lines.append(row("droop", droop_true, "droop", 100.0, " %"))
     lines.append(row("max|S|", truth.get("max_S"), "max_abs_s", 1.0, ""))
     lines.append(row("max|G_1|", truth.get("max_G1"), "max_abs_g1", 1.0, ""))
-    methods = sorted({r.get("method") for r in ok})
+    methods = sorted({m["result"].get("method") for m in done})
     if methods:
         lines.append(f"  method(s): {', '.join(str(m) for m in methods)}"
                      + ("; without excitation S, G_p and the TSO checks are not identifiable (Z_u)"
                         if methods == ["zu"] else ""))
-    if not ok:
+    if not done:
         lines.append("  no identification produced a result: see the lines above")
     return lines
 
