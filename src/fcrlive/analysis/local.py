@@ -25,9 +25,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from fcrlive.analysis.tso_checks import Z95, _grid, _refined_min, as_response, evaluate
+from fcrlive.analysis.tso_checks import Z95, as_response, evaluate
 from fcrlive.constants import PAPER_EXCITATION_STD_PU
 from fcrlive.errors import ConfigError
+from fcrlive.gridsearch import log_grid, refined_min
+from fcrlive.gridsearch import peak as grid_peak
 
 DEFAULT_MS = 1.5
 """Default bound M_s on max|S| (eq. 9); see the module docstring."""
@@ -70,13 +72,7 @@ class Peak:
 def peak(fr, omega_range: tuple[float, float] = DEFAULT_OMEGA_RANGE, *, n: int = 3000) -> Peak:
     """max |fr(jω)| over omega_range [rad/s], refined around the grid maximum."""
     f = as_response(fr)
-    w = _grid(*omega_range, n)
-
-    def neg(x):
-        return -np.abs(evaluate(f, x))
-
-    v, wm = _refined_min(neg, w, neg(w))
-    return Peak(-v, wm)
+    return Peak(*grid_peak(lambda x: np.abs(evaluate(f, x)), *omega_range, n))
 
 
 @dataclass(frozen=True)
@@ -158,12 +154,12 @@ def check_disturbance_rejection(
     for a 30-min record).
     """
     g, sh = as_response(G1), spectrum_shape(spectrum)
-    w = _grid(*omega_range, 3000)
+    w = log_grid(*omega_range, 3000)
 
     def neg(x):
         return -(np.abs(evaluate(g, x)) ** 2) * np.asarray(sh(x), float)
 
-    v, wm = _refined_min(neg, w, neg(w))
+    v, wm = refined_min(neg, w, neg(w))
     m = -v
     adm = sigma_req**2 / m if m > 0 else float("inf")
     ratio = passed = var = None
@@ -226,7 +222,7 @@ def loop_margins(
     resolution may be missed: ``n`` log-spaced points (default 20 000 over the range).
     """
     f = as_response(L)
-    w = _grid(*omega_range, n)
+    w = log_grid(*omega_range, n)
     Lw = evaluate(f, w)
 
     def im(x):
@@ -243,7 +239,7 @@ def loop_margins(
     def dist(x):
         return np.abs(1.0 + evaluate(f, x))
 
-    sm, wsm = _refined_min(dist, w, np.abs(1.0 + Lw))
+    sm, wsm = refined_min(dist, w, np.abs(1.0 + Lw))
     if gms:
         i = int(np.argmin(np.abs(np.log(gms))))
         gm, wpc = gms[i], pcs[i]

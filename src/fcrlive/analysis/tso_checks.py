@@ -26,10 +26,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from fcrlive.constants import F0_HZ
 from fcrlive.errors import ConfigError
+from fcrlive.gridsearch import log_grid, refined_min
 
 FrequencyResponse = Callable[[np.ndarray], np.ndarray]
 """``fr(omega [rad/s]) -> complex ndarray`` of the same shape."""
@@ -271,32 +271,6 @@ def band_omega(band_s: tuple[float, float] = TSO_BAND_PERIODS_S) -> tuple[float,
     return 2 * np.pi / t_hi, 2 * np.pi / t_lo
 
 
-def _grid(w_lo: float, w_hi: float, n: int) -> np.ndarray:
-    return np.logspace(np.log10(w_lo), np.log10(w_hi), n)
-
-
-def _refined_min(
-    fun: Callable[[np.ndarray], np.ndarray], w: np.ndarray, vals: np.ndarray
-) -> tuple[float, float]:
-    """(min value, ω) of fun, refined by a bounded 1-D search in log ω around the grid minimum."""
-    ok = np.isfinite(vals)
-    if not ok.any():
-        return float("nan"), float("nan")
-    i = int(np.nanargmin(np.where(ok, vals, np.inf)))
-    best_v, best_w = float(vals[i]), float(w[i])
-    lo, hi = w[max(i - 1, 0)], w[min(i + 1, w.size - 1)]
-    if hi > lo:
-        res = minimize_scalar(
-            lambda lx: float(fun(np.array([np.exp(lx)]))[0]),
-            bounds=(np.log(lo), np.log(hi)),
-            method="bounded",
-            options={"xatol": 1e-7},
-        )
-        if np.isfinite(res.fun) and res.fun < best_v:
-            best_v, best_w = float(res.fun), float(np.exp(res.x))
-    return best_v, best_w
-
-
 # --------------------------------------------------------------------------------------------------
 # Req. 8: distance from −1 and encirclement
 # --------------------------------------------------------------------------------------------------
@@ -385,12 +359,12 @@ def stability_margin(
     moves F by z·sd towards −1/G, the worst direction: |1 + F G| − z·sd·|G|.
     """
     Ff, Gf = as_response(F), as_response(G)
-    w = _grid(*omega_range, n)
+    w = log_grid(*omega_range, n)
 
     def dist(x):
         return np.abs(1.0 + evaluate(Ff, x) * evaluate(Gf, x))
 
-    m, wm = _refined_min(dist, w, dist(w))
+    m, wm = refined_min(dist, w, dist(w))
     lower = None
     if F_sd is not None:
         sdf = as_response(F_sd)
@@ -398,7 +372,7 @@ def stability_margin(
         def dist_lo(x):
             return dist(x) - z * np.abs(evaluate(sdf, x)) * np.abs(evaluate(Gf, x))
 
-        lower, _ = _refined_min(dist_lo, w, dist_lo(w))
+        lower, _ = refined_min(dist_lo, w, dist_lo(w))
     return StabilityMargin(m, wm, lower)
 
 
@@ -474,7 +448,7 @@ def performance(
     ``F_sd``: as in stability_margin, the upper bound uses |1 + F G/K| − z·sd·|G|/K.
     """
     Ff, Gf = as_response(F), as_response(G)
-    w = _grid(*omega_range, n)
+    w = log_grid(*omega_range, n)
     Fv, Gv, Dv = evaluate(Ff, w), evaluate(Gf, w), disturbance_profile(w)
     sdv = np.abs(evaluate(as_response(F_sd), w)) if F_sd is not None else None
 
@@ -484,7 +458,7 @@ def performance(
         return np.where(np.isfinite(r), -r, np.nan)
 
     r_grid = _ratio_fun(Fv, Gv, Dv, None, 1.0, margin, z)
-    neg, wm = _refined_min(neg_ratio, w, np.where(np.isfinite(r_grid), -r_grid, np.nan))
+    neg, wm = refined_min(neg_ratio, w, np.where(np.isfinite(r_grid), -r_grid, np.nan))
     ratio = -neg
     if np.isnan(ratio) and np.isinf(r_grid).any():
         ratio, wm = float("inf"), float(w[np.argmax(r_grid)])
@@ -497,7 +471,7 @@ def performance(
     k_red = 1.0 if ratio < 1.0 else _k_red(lambda k: worst(k) if k < 1.0 else max(worst(1.0), ratio))
     ratio_up = k_lo = None
     if sdv is not None:
-        neg_u, _ = _refined_min(
+        neg_u, _ = refined_min(
             lambda x: neg_ratio(x, sd=True), w, -_ratio_fun(Fv, Gv, Dv, sdv, 1.0, margin, z)
         )
         ratio_up = -neg_u

@@ -64,6 +64,7 @@ from typing import TYPE_CHECKING, Literal, NamedTuple
 
 import numpy as np
 
+from fcrlive.gridsearch import peak as grid_peak
 from fcrlive.plant.params import Plant, Turbine, Unit
 
 if TYPE_CHECKING:
@@ -504,24 +505,8 @@ def peak(sys: LTI, omega_min: float = 1e-4, omega_max: float | None = None, n: i
     ``omega_max`` defaults to 1e3 rad/s for continuous systems and the Nyquist frequency π/dt for
     discrete ones.
     """
-    from scipy.optimize import minimize_scalar
-
     if omega_max is None:
         omega_max = math.pi / float(sys.dt) if _is_discrete(sys) else 1e3
     if not 0 < omega_min < omega_max:
         raise ValueError(f"need 0 < omega_min < omega_max, got {omega_min}, {omega_max}")
-    grid = np.geomspace(omega_min, omega_max, n)
-    mag = np.abs(freqresp(sys, grid))
-    i = int(np.nanargmax(mag))
-    best = Peak(float(mag[i]), float(grid[i]))
-    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, n - 1)]
-    if hi > lo:
-        res = minimize_scalar(
-            lambda lw: -abs(complex(freqresp(sys, math.exp(lw)))),
-            bounds=(math.log(lo), math.log(hi)),
-            method="bounded",
-            options={"xatol": 1e-9},
-        )
-        if -res.fun > best.value:
-            best = Peak(float(-res.fun), float(math.exp(res.x)))
-    return best
+    return Peak(*grid_peak(lambda w: np.abs(freqresp(sys, w)), omega_min, omega_max, n, xatol=1e-9))
