@@ -30,6 +30,7 @@ from fcrlive.analysis import local
 from fcrlive.analysis.experiments import ExperimentResult, SineExperiment
 from fcrlive.analysis.tso_checks import TsoVerdict, assess_tso, assess_tso_points, fme_response
 from fcrlive.constants import TSO_PERIODS_S
+from fcrlive.gridsearch import uncertain_peak
 from fcrlive.ident import Z95, FreqResp, PeakGain
 
 OMEGA_MIN = 1e-3
@@ -102,16 +103,8 @@ class Assessment:
     F_sd_callable: object = field(default=None, compare=False)
 
 
-def _grid(omega_max: float, n: int = 1500) -> np.ndarray:
-    return np.geomspace(OMEGA_MIN, omega_max, n)
-
-
 def _peak(fr_fun, key: str, omega_max: float) -> PeakEstimate:
-    w = _grid(omega_max, 1000)
-    g = fr_fun(w)[key]
-    j = int(np.argmax(g.abs))
-    lo, hi = w[max(j - 1, 0)], w[min(j + 1, w.size - 1)]
-    pk: PeakGain = fr_fun(np.linspace(lo, hi, 101))[key].max_abs()
+    pk: PeakGain = uncertain_peak(lambda w: fr_fun(w)[key], OMEGA_MIN, omega_max, 1000)
     return PeakEstimate(pk.value, pk.omega, pk.sd)
 
 

@@ -226,14 +226,6 @@ def coverage(lo, hi, true_value) -> float:
 # Estimates of one run
 
 
-def _peak(fr_fun, key: str, omega_min: float, omega_max: float):
-    w = np.geomspace(omega_min, omega_max, 1500)
-    g = fr_fun(w)[key]
-    j = int(np.argmax(g.abs))
-    lo, hi = w[max(j - 1, 0)], w[min(j + 1, w.size - 1)]
-    return fr_fun(np.linspace(lo, hi, 101))[key].max_abs()
-
-
 def closed_loop_estimates(exp, periods_s: Sequence[float], grid: np.ndarray = GRID) -> tuple[dict, dict]:
     """(row fields, responses on ``grid``) from an fcrlive.analysis.experiments.ExperimentResult."""
     fr = exp.responses
@@ -244,11 +236,12 @@ def closed_loop_estimates(exp, periods_s: Sequence[float], grid: np.ndarray = GR
     row.update(g1_static=v, g1_static_lo=v - Z95 * sd, g1_static_hi=v + Z95 * sd)
     # The same band as `fcrlive identify` reports: peaks beyond the data's passband are model artefacts.
     from fcrlive.analysis.assess import peak_band
+    from fcrlive.gridsearch import uncertain_peak
 
     band = peak_band(exp.Ts)
     for name, key in (("max_g1", "G_1"), ("max_s", "S")):
         if key in exp.identifiable:
-            pk = _peak(fr, key, *band)
+            pk = uncertain_peak(lambda w, k=key: fr(w)[k], *band, 1500)
             lo, hi = pk.ci95()
             row.update({name: pk.value, f"{name}_lo": lo, f"{name}_hi": hi, f"{name}_omega": pk.omega})
     keys = [k for k in ("G_1", "S", "G_p") if k in exp.identifiable]

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import scipy.signal as sps
 
+from fcrlive.gridsearch import uncertain_peak
 from fcrlive.ident.data import IdData
 from fcrlive.ident.freqresp import FreqResp
 
@@ -305,9 +306,4 @@ class PolyModel:
     def peak_gain(self, input: int | str = 0, n: int = 2000, omega_max: float | None = None):
         """max_ω |G_i| on a log grid up to ``omega_max`` (default Nyquist), refined near the peak."""
         wmax = np.pi / self.Ts if omega_max is None else omega_max
-        w = np.geomspace(wmax * 1e-4, wmax, n)
-        g = self.freqresp(w, input=input)
-        j = int(np.argmax(g.abs))
-        lo, hi = w[max(j - 1, 0)], w[min(j + 1, n - 1)]
-        wf = np.linspace(lo, hi, 201)
-        return self.freqresp(wf, input=input).max_abs()
+        return uncertain_peak(lambda w: self.freqresp(w, input=input), wmax * 1e-4, wmax, n)
