@@ -15,7 +15,9 @@ the plant description file or None, ``kd`` the load damping of ``[unit]``; a plu
 (and may ignore) further keyword parameters. The default plug-in is
 :func:`fcrlive.daemon.identify_plugin.identify_window`. The result may be an object with
 ``to_json()`` (returning a dict or a JSON string), a dict, or a JSON string; the worker returns it
-as a dict, which is stored in SQLite and published on MQTT.
+as a dict, which the service judges by the result-quality rule (:mod:`fcrlive.daemon.result_quality`:
+the keys ``droop``, ``max_abs_s``, ``max_abs_g1`` in the forms of docs/mqtt.md), stores in SQLite and
+publishes on MQTT.
 """
 
 from __future__ import annotations
