@@ -3,6 +3,7 @@ constructed reports of the real type, through the topic split, and through the w
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import sqlite3
@@ -28,33 +29,28 @@ KD = 0.1
 HEADLINE = {"droop", "max_abs_s", "max_abs_g1", "tso/fcrn", "tso/fcrd", "tso/fcrd_up", "tso/fcrd_down", "gp"}
 
 
+@functools.cache
 def _report(minutes: float, excitation: bool, seed: int) -> IdentifyReport:
     res = simulate(PLANT, SimConfig(duration_s=60 * minutes, snr_db=12.0, excitation=excitation, seed=seed))
     ps = plant_signals(log_from_sim(res), rated_mw=300.0)
     return identify_signals(ps, rated_mw=300.0, f0=50.0, kd=KD, plant=PLANT if excitation else None)
 
 
-# Seeds picked from a survey of 10-min windows (docs/daemon.md, "Result quality"): Z_cu seed 0 is a
-# good window, Z_cu seed 3 the demo's wild outlier, Z_u seed 5 a droop with a uselessly wide interval,
-# Z_u seed 4 a good droop with a wide max|G_1|.
-@pytest.fixture(scope="module")
+# Windows picked from a survey of 10-min windows (docs/daemon.md, "Result quality"): (minutes,
+# excitation, seed)
+ZCU_GOOD = (10, True, 0)
+"""A good Z_cu window."""
+ZCU_WILD = (10, True, 3)
+"""A wild outlier of the kind the demo showed: no droop, max|S| 5.3 in [0, 14.8]."""
+ZU_WIDE = (10, False, 5)
+"""Z_u: a droop with a uselessly wide interval."""
+ZU_FAIR = (10, False, 4)
+"""Z_u: a good droop with a wide max|G_1|."""
+
+
+@pytest.fixture
 def zcu_good() -> IdentifyReport:
-    return _report(10, True, 0)
-
-
-@pytest.fixture(scope="module")
-def zcu_wild() -> IdentifyReport:
-    return _report(10, True, 3)
-
-
-@pytest.fixture(scope="module")
-def zu_wide() -> IdentifyReport:
-    return _report(10, False, 5)
-
-
-@pytest.fixture(scope="module")
-def zu_fair() -> IdentifyReport:
-    return _report(10, False, 4)
+    return _report(*ZCU_GOOD)
 
 
 def _payload(result: dict | None, verdict, error: str | None = None) -> ResultPayload:
@@ -80,8 +76,8 @@ def test_good_short_zcu_window_is_ok_and_fully_published(zcu_good):
     assert topics["result_quality"].level == "ok"
 
 
-def test_wild_short_zcu_window_is_rejected_and_keeps_the_headline_topics(zcu_wild):
-    r = zcu_wild.to_json_dict()
+def test_wild_short_zcu_window_is_rejected_and_keeps_the_headline_topics():
+    r = _report(*ZCU_WILD).to_json_dict()
     # what the demo showed: no droop, a max|S| far from 1.29 with an interval reaching 0
     assert r["droop"] is None and r["max_abs_s"]["value"] > 3 and r["max_abs_s"]["ci95"][0] == 0.0
     v = judge(r)
@@ -95,8 +91,8 @@ def test_wild_short_zcu_window_is_rejected_and_keeps_the_headline_topics(zcu_wil
     assert json.loads(topics["result/latest"].model_dump_json())["result_quality"]["level"] == "rejected"
 
 
-def test_short_zu_window_with_a_useless_droop_interval_is_rejected(zu_wide):
-    r = zu_wide.to_json_dict()
+def test_short_zu_window_with_a_useless_droop_interval_is_rejected():
+    r = _report(*ZU_WIDE).to_json_dict()
     lo, hi = r["droop"]["ci95"]
     assert r["method"] == "zu" and (hi - lo) / r["droop"]["value"] > 2  # e.g. 6 % in [0, 22] %
     v = judge(r)
@@ -105,8 +101,8 @@ def test_short_zu_window_with_a_useless_droop_interval_is_rejected(zu_wide):
     assert "rejected above 1x" in v.quantities["droop"].reasons[0]
 
 
-def test_short_zu_window_with_a_wide_peak_is_uncertain_and_published_marked(zu_fair):
-    r = zu_fair.to_json_dict()
+def test_short_zu_window_with_a_wide_peak_is_uncertain_and_published_marked():
+    r = _report(*ZU_FAIR).to_json_dict()
     v = judge(r)
     assert v.level == "uncertain"
     assert v.quantities["droop"].level == "ok" and v.quantities["max_abs_g1"].level == "uncertain"
@@ -116,11 +112,12 @@ def test_short_zu_window_with_a_wide_peak_is_uncertain_and_published_marked(zu_f
     assert "uncertain above 0.25x" in topics["max_abs_g1"].quality.reasons[0]
 
 
-def test_thresholds_come_from_the_configuration(zu_fair, zu_wide):
-    r = zu_fair.to_json_dict()
+def test_thresholds_come_from_the_configuration():
+    r = _report(*ZU_FAIR).to_json_dict()
     assert judge(r, ResultQualityConfig(uncertain_ci_rel_width=1.0)).level == "ok"
     assert judge(r, ResultQualityConfig(droop_min_pct=9.0, droop_max_pct=20.0)).level == "rejected"
-    assert judge(zu_wide.to_json_dict(), ResultQualityConfig(reject_ci_rel_width=10.0)).level == "uncertain"
+    wide = _report(*ZU_WIDE).to_json_dict()
+    assert judge(wide, ResultQualityConfig(reject_ci_rel_width=10.0)).level == "uncertain"
 
 
 # -- constructed reports of the real type -----------------------------------------------------------
