@@ -270,33 +270,33 @@ class _IcProjection:
         of 1/C. A constant column takes the output offset left by removing the means of a not-at-rest
         record."""
         noise = st.nc > 0 or st.nd > 0
-        cols = [np.ones(L)]
+        resp = []
         for i in range(st.nu):
             m = min(max(st.nf[i], st.nk[i] + st.nb[i] - 1), L)
             if m == 0:
                 continue
-            h = sps.lfilter([1.0], F[i], _unit_impulse(L))
+            h = sps.lfilter(_ONE, F[i], _unit_impulse(L))
             if noise:
                 h = sps.lfilter(D, C, h)
-            cols.append(_shifted_copies(h, m))
+            resp.append((h, m))
         mc = min(max(st.nc, st.nd), L)
         if mc:
-            cols.append(_shifted_copies(sps.lfilter([1.0], C, _unit_impulse(L)), mc))
-        return np.column_stack(cols)
+            resp.append((sps.lfilter(_ONE, C, _unit_impulse(L)), mc))
+        Phi = np.empty((L, 1 + sum(m for _, m in resp)))
+        Phi[:, 0] = 1.0
+        c = 1
+        for h, m in resp:
+            # the responses to impulses at t = 0 .. m−1 of a filter starting from rest are delayed copies
+            # of ONE impulse response
+            for j in range(m):
+                Phi[:j, c + j] = 0.0
+                Phi[j:, c + j] = h[:L - j]
+            c += m
+        return Phi
 
     def project(self, X: np.ndarray) -> None:
         """X ← P⊥ X in place."""
         X -= self.Q @ (self.Q.T @ X)
-
-
-def _shifted_copies(h: np.ndarray, m: int) -> np.ndarray:
-    """Columns h delayed by 0 .. m−1 samples: the responses to impulses at t = 0 .. m−1 of a filter
-    starting from rest, got from ONE filtering instead of m (this basis is rebuilt at every step)."""
-    L = h.size
-    out = np.zeros((L, m))
-    for j in range(m):
-        out[j:, j] = h[:L - j]
-    return out
 
 
 def _ls(X: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -327,6 +327,10 @@ class _SearchResult:
     converged: bool
     stop_reason: str
     algorithm: str
+    eps: np.ndarray
+    """ε at ``theta``, and below what :func:`_jacobian` needs there: the multistart's tests and the
+    covariance use them instead of evaluating that point again."""
+    aux: tuple
 
 
 def _gn_step(J: np.ndarray, eps: np.ndarray) -> np.ndarray:
@@ -341,7 +345,8 @@ def _gn_step(J: np.ndarray, eps: np.ndarray) -> np.ndarray:
 def _search(st: _Struct, th0: np.ndarray, segs, maxiter: int = 100, tol: float = 1e-10) -> _SearchResult:
     """Gauss-Newton with step halving and stability guard; Levenberg-Marquardt fallback."""
     th = th0.copy()
-    eps, J = _eval(st, th, segs, True)
+    eps, aux = _residuals(st, th, segs)
+    J = _jacobian(st, segs, aux)
     V = float(eps @ eps)
     it = 0
     algorithm = "gn"
@@ -364,7 +369,7 @@ def _search(st: _Struct, th0: np.ndarray, segs, maxiter: int = 100, tol: float =
             for _ in range(20):
                 cand = th + mu * delta
                 if _stable(st, cand):
-                    e2, aux = _residuals(st, cand, segs)
+                    e2, aux2 = _residuals(st, cand, segs)
                     V2 = float(e2 @ e2)
                     if V2 < V:
                         accepted = True
@@ -377,19 +382,19 @@ def _search(st: _Struct, th0: np.ndarray, segs, maxiter: int = 100, tol: float =
                 continue
             rel = (V - V2) / V
             th = cand
-            eps, V = e2, V2
+            eps, V, aux = e2, V2, aux2
             if rel <= tol and mu * np.linalg.norm(delta) <= 1e-8 * (1 + np.linalg.norm(th)):
                 converged, reason = True, "relative loss decrease and step below tolerance"
                 break
             J = _jacobian(st, segs, aux)
         else:
-            th, V, k, converged, reason = _lm(st, th, eps, J, V, segs, maxiter - it + 1, tol)
+            th, V, k, converged, reason, eps, aux = _lm(st, th, eps, aux, J, V, segs, maxiter - it + 1, tol)
             it += k
             break
-    return _SearchResult(th, V, it, converged, reason, algorithm)
+    return _SearchResult(th, V, it, converged, reason, algorithm, eps, aux)
 
 
-def _lm(st, th, eps, J, V, segs, maxiter, tol):
+def _lm(st, th, eps, aux, J, V, segs, maxiter, tol):
     """Levenberg-Marquardt (Marquardt diagonal scaling) with the same stability guard."""
     H = J.T @ J
     g = J.T @ eps
@@ -407,15 +412,15 @@ def _lm(st, th, eps, J, V, segs, maxiter, tol):
         cand = th + delta
         ok = _stable(st, cand)
         if ok:
-            e2, aux = _residuals(st, cand, segs)
+            e2, aux2 = _residuals(st, cand, segs)
             V2 = float(e2 @ e2)
             ok = V2 < V
         if ok:
             rel = (V - V2) / V
-            th, V = cand, V2
+            th, V, eps, aux = cand, V2, e2, aux2
             if rel <= tol:
-                return th, V, k, True, "Levenberg-Marquardt: relative loss decrease below tolerance"
-            eps, J = e2, _jacobian(st, segs, aux)
+                return th, V, k, True, "Levenberg-Marquardt: relative loss decrease below tolerance", eps, aux
+            J = _jacobian(st, segs, aux)
             H = J.T @ J
             g = J.T @ eps
             dg = np.diag(H).copy()
@@ -428,8 +433,8 @@ def _lm(st, th, eps, J, V, segs, maxiter, tol):
                 gn = float(np.abs(g).max() / np.sqrt(V + 1e-300))
                 return th, V, k, gn < 1e-6 * np.sqrt(np.diag(H).max()), (
                     "Levenberg-Marquardt: no descent even with maximal damping"
-                )
-    return th, V, k, False, f"Levenberg-Marquardt: maximum number of iterations ({maxiter}) reached"
+                ), eps, aux
+    return th, V, k, False, f"Levenberg-Marquardt: maximum number of iterations ({maxiter}) reached", eps, aux
 
 
 # ===================================================================== initial values
@@ -736,8 +741,7 @@ def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, mult
         # likelihood-ratio test of the BJ fit against the high-order ARX on the same rows: at the global
         # minimum of a right structure N·log(V_bj/V_arx) ~ χ²(p_arx − p_bj); far above it means a local
         # minimum (or too low orders, in which case the restarts only cost time)
-        e, _ = _eval(st, r.theta, segs, False)
-        v_bj = float(np.mean(e[arx_rows] ** 2))
+        v_bj = float(np.mean(r.eps[arx_rows] ** 2))
         return bool(arx_rows.size * np.log(v_bj / arx_loss) > lr_limit)
 
     if multistart == "auto" and method == "bj" and shorter is not None:
@@ -759,7 +763,7 @@ def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, mult
             if multistart == "auto" and not stalled(best) and len(results) >= 2:
                 break
     th = best.theta
-    eps, J = _eval(st, th, segs, True)
+    eps, J = best.eps, _jacobian(st, segs, best.aux)
     ssr = float(eps @ eps)
     lam = ssr / (n - st.p)
     cov = _covariance(J, lam) if covariance == "gauss" else _sandwich(J, eps, data.bounds)
