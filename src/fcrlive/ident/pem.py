@@ -11,9 +11,12 @@ Search (what made the prototype robust on a hard closed-loop case, libraries.md)
      onto/outside the unit circle or does not lower the loss;
   3. Levenberg-Marquardt (same stability guard) when Gauss-Newton cannot descend;
   4. multi-start when the first search stalls (not converged, or a loss clearly above the
-     high-order ARX's): the other initial value and perturbed ones; the lowest loss is kept.
+     high-order ARX's): the other initial value and perturbed ones; the lowest loss is kept. A BJ fit
+     whose high-order ARX has more than 8 poles always also tries the start from a shorter ARX
+     (see ``_pem``).
 
-The Jacobian ∂ε/∂θ is analytic (filters of u, of the simulated outputs, of ε and of v; see ``_eval``).
+The Jacobian ∂ε/∂θ is analytic (filters of u, of the simulated outputs, of ε and of v; see
+``_jacobian``).
 Covariance: Cov θ̂ = λ̂ (JᵀJ)⁻¹ at θ̂, λ̂ = Σε²/(N − p) (Gauss approximation, asymptotically exact when
 the model structure contains the true system and the data are informative).
 """
@@ -160,24 +163,19 @@ def _shifted(dst: np.ndarray, x: np.ndarray, lag: int, sign: float) -> None:
 
 
 def _eval(st: _Struct, th: np.ndarray, segs, want_jac: bool):
-    """Prediction errors ε (N,) and, if asked, J = ∂ε/∂θ (N, p), experiments stacked.
-
-    ε = (D/C) v, v = y − Σ w_i, w_i = (B_i/F_i) u_i. Columns of J (all filters from rest):
-        ∂ε/∂b_{i,j} = −(D/(C F_i)) u_i(t − nk_i − j)
-        ∂ε/∂f_{i,k} = +(D/(C F_i)) w_i(t − k)
-        ∂ε/∂c_k     = −(1/C) ε(t − k)
-        ∂ε/∂d_k     = +(1/C) v(t − k)
-
-    With ``st.ic`` the estimated free response (:class:`_IcProjection`) is taken off ε and J is
-    projected the same way (J ← P⊥ J; the basis is treated as fixed, its derivative dropped).
-    """
+    """ε and, if asked, J at θ (:func:`_residuals`, :func:`_jacobian`)."""
     eps, aux = _residuals(st, th, segs)
     return eps, (_jacobian(st, segs, aux) if want_jac else None)
 
 
 def _residuals(st: _Struct, th: np.ndarray, segs):
-    """ε of :func:`_eval` and what :func:`_jacobian` needs from its computation: the search evaluates
-    the loss at a trial point and then, if the step is accepted, the Jacobian at the same point."""
+    """Prediction errors ε (N,), experiments stacked, and what :func:`_jacobian` needs from their
+    computation (the search evaluates the loss at a trial point and then, if the step is accepted, the
+    Jacobian at the same point).
+
+    ε = (D/C) v, v = y − Σ w_i, w_i = (B_i/F_i) u_i, all filters from rest; with ``st.ic`` the
+    estimated free response is taken off (:class:`_IcProjection`).
+    """
     B, F, C, D = st.polys(th)
     noise = st.nc > 0 or st.nd > 0
     n = sum(s[0].shape[0] for s in segs)
@@ -204,7 +202,15 @@ def _residuals(st: _Struct, th: np.ndarray, segs):
 
 
 def _jacobian(st: _Struct, segs, aux) -> np.ndarray:
-    """J of :func:`_eval` from the intermediate results of :func:`_residuals` at the same θ."""
+    """J = ∂ε/∂θ (N, p) from the intermediate results of :func:`_residuals` at the same θ.
+
+    Columns (all filters from rest):
+        ∂ε/∂b_{i,j} = −(D/(C F_i)) u_i(t − nk_i − j)
+        ∂ε/∂f_{i,k} = +(D/(C F_i)) w_i(t − k)
+        ∂ε/∂c_k     = −(1/C) ε(t − k)
+        ∂ε/∂d_k     = +(1/C) v(t − k)
+    With ``st.ic``, J ← P⊥ J (:class:`_IcProjection`).
+    """
     F, C, D, parts = aux
     noise = st.nc > 0 or st.nd > 0
     n = sum(s[0].shape[0] for s in segs)
@@ -252,10 +258,15 @@ class _IcProjection:
     """Variable projection of each experiment's initial filter states and output offset.
 
     The basis Φ (:meth:`basis`) spans the free responses of every filter's initial state in ε, plus an
-    output offset; ε ← P⊥ ε and J ← P⊥ J with P⊥ the projector off its span (the basis is treated as
-    fixed, its derivative dropped). For the slow poles of governor loops (time constants of minutes)
-    the free response from a not-at-rest start otherwise dominates the simulation error of OE/BJ and
-    pulls the fit into wrong minima.
+    output offset; ε ← P⊥ ε and J ← P⊥ J with P⊥ the projector off its span. For the slow poles of
+    governor loops (time constants of minutes) the free response from a not-at-rest start otherwise
+    dominates the simulation error of OE/BJ and pulls the fit into wrong minima.
+
+    J ← P⊥ J treats Φ as fixed, so Jᵀε is not the exact gradient of the loss (1.5-5 % off on test
+    data) and a search often ends in "no descent" at a minimum rather than converged, which starts the
+    restarts. Kaufman's term −P⊥ (∂Φ/∂θ) ĉ makes it exact (checked against finite differences), but
+    then fewer restarts ran and Z_u missed the droop by more than 0.5 pp on 6 of 20 15-min records
+    instead of 1 (paper-plant1, 12 dB), and its intervals changed: not used.
     """
 
     def __init__(self, st: _Struct, F, C, D, L: int):
@@ -841,8 +852,9 @@ def bj(data: IdData, nb: int | Sequence[int], nc: int, nd: int, nf: int | Sequen
         nb, nf, nk: per input (or one int for all): number of B coefficients, order of F, delay [samples].
         nc, nd: orders of the shared noise model C/D.
         init: initial model (same orders, A = 1); roots outside the unit circle are reflected inside.
-        multistart: "auto" (restart when the first search stalls), True (always try every start),
-            False (one start).
+        multistart: "auto" (restart when the first search stalls; BJ also always tries the start
+            from a shorter ARX when the high-order one has more than 8 poles), True (always try every
+            start), False (one start).
         n_high: order of the high-order ARX used for initial values (default from N, at most 30).
         maxiter, tol: iteration limit and relative loss tolerance of the search.
         seed: seed of the perturbed restarts (the result is deterministic for a given seed).
