@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import json
 import logging
 import os
 import signal
@@ -66,10 +65,9 @@ seed = 7
 
 
 async def run(window_min: float) -> None:
-    import aiomqtt
-
     import sim_device
     from fcrlive.daemon.broker import start_broker
+    from fcrlive.daemon.mqtt import first_identification
     from fcrlive.plant.description import load_plant
 
     with tempfile.TemporaryDirectory() as td:
@@ -88,21 +86,13 @@ async def run(window_min: float) -> None:
             env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
             proc = subprocess.Popen([sys.executable, "-m", "fcrlive.cli", "run", "--config", str(cfg)],
                                     stdout=subprocess.DEVNULL, stderr=log.open("w"), env=env)
-            res = None
             try:
-                async with aiomqtt.Client("127.0.0.1", broker.port) as c:
-                    await c.subscribe("fcrlive/P1/result/latest", qos=1)
-                    async with asyncio.timeout(window_min * 60.0 + 300.0):
-                        async for m in c.messages:
-                            msg = json.loads(m.payload)
-                            if msg["ok"] or not (msg["error"] or "").startswith("too little good data"):
-                                res = msg
-                                break
+                res = await first_identification("127.0.0.1", broker.port, "P1", window_min * 60.0 + 300.0)
             finally:
                 proc.send_signal(signal.SIGTERM)
                 proc.wait(30)
-    if res is None or not res["ok"]:
-        print(f"no result: {res and res['error']}")
+    if not res["ok"]:
+        print(f"no result: {res['error']}")
         return
     r = res["result"]
     droop_true = 100.0 / (1.0 / truth["g1_static"] - 0.1)

@@ -20,6 +20,7 @@ import aiomqtt
 import pytest
 
 from fcrlive.daemon.broker import free_port, start_broker
+from fcrlive.daemon.mqtt import first_identification
 from fcrlive.daemon.store import connect, read_results, read_runs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -222,14 +223,7 @@ async def test_excited_droop_over_mqtt_within_half_a_point_of_the_simulated_plan
         proc = _daemon(cfg, log)
         res = exc_event = None
         try:
-            async with aiomqtt.Client("127.0.0.1", broker.port) as c:
-                await c.subscribe("fcrlive/G1/result/latest", qos=1)
-                async with asyncio.timeout(window_min * 60.0 + 240.0):
-                    async for m in c.messages:
-                        msg = json.loads(m.payload)
-                        if msg["ok"] or not (msg["error"] or "").startswith("too little good data"):
-                            res = msg
-                            break
+            res = await first_identification("127.0.0.1", broker.port, "G1", window_min * 60.0 + 240.0)
             async with aiomqtt.Client("127.0.0.1", broker.port) as c:  # fresh: the retained state
                 await c.subscribe("fcrlive/G1/excitation", qos=1)
                 async with asyncio.timeout(30.0):

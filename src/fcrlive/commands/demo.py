@@ -172,6 +172,7 @@ async def _demo(args) -> int:
     from fcrlive.daemon.broker import EmbeddedBroker, MosquittoBroker, start_broker
     from fcrlive.daemon.config import load_config
     from fcrlive.daemon.health import setup_logging
+    from fcrlive.daemon.payloads import is_data_skip
     from fcrlive.daemon.service import Service
     from fcrlive.errors import UserError
     from fcrlive.plant.description import load_plant
@@ -253,7 +254,7 @@ async def _demo(args) -> int:
                                       if p is not None and f is not None else f"{rate} (no good samples yet)",
                                       flush=True)
                             continue
-                        if not msg["ok"] and msg["error"] and msg["error"].startswith("too little good data"):
+                        if is_data_skip(msg):
                             print(f"  (window not full yet: {msg['error']})", flush=True)
                             continue
                         results.append(msg)

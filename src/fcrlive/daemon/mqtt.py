@@ -27,7 +27,7 @@ import aiomqtt
 from pydantic import BaseModel
 
 from fcrlive.daemon.modbus_source import backoff_delays
-from fcrlive.daemon.payloads import TOPICS, to_bytes
+from fcrlive.daemon.payloads import TOPICS, is_data_skip, to_bytes
 
 log = logging.getLogger("fcrlive.mqtt")
 
@@ -254,3 +254,15 @@ class MqttPublisher:
             self._wake.clear()
             await self._wake.wait()
 
+
+async def first_identification(host: str, port: int, unit: str, timeout_s: float) -> dict:
+    """The first ``fcrlive/<unit>/result/latest`` message (JSON) of a run that was not skipped for too
+    little data, read as a dashboard would (tests, benchmarks). Raises TimeoutError after ``timeout_s``."""
+    async with aiomqtt.Client(host, port) as client:
+        await client.subscribe(f"fcrlive/{unit}/result/latest", qos=1)
+        async with asyncio.timeout(timeout_s):
+            async for m in client.messages:
+                msg = json.loads(m.payload)
+                if not is_data_skip(msg):
+                    return msg
+    raise aiomqtt.MqttError("the broker closed the subscription")

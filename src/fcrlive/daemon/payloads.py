@@ -96,6 +96,15 @@ class ResultPayload(_Payload):
         None, description="the quality rule's verdict; rejected also for a skipped or failed run")
 
 
+SKIPPED_TOO_LITTLE_DATA = "too little good data"
+"""How ``ResultPayload.error`` starts when a window was skipped for missing samples (not a failed fit)."""
+
+
+def is_data_skip(msg: dict) -> bool:
+    """True for a ``result/latest`` message (as JSON) of a window skipped for too little good data."""
+    return not msg["ok"] and (msg.get("error") or "").startswith(SKIPPED_TOO_LITTLE_DATA)
+
+
 class ExcitationEventPayload(_Payload):
     """``excitation``: every change of the excitation's state, with the safety guard's reasons (retained)."""
 

@@ -30,6 +30,7 @@ from fcrlive.daemon.config import FcrliveConfig
 from fcrlive.daemon.health import Metrics, sd_notify, watchdog_interval_s
 from fcrlive.daemon.livestats import LiveStats
 from fcrlive.daemon.payloads import (
+    SKIPPED_TOO_LITTLE_DATA,
     DataQuality,
     ExcitationEventPayload,
     ResultPayload,
@@ -168,7 +169,7 @@ class Service:
         quality = window_quality(w, expected)
         result, error, dt = None, None, 0.0
         if quality.ok_fraction < ic.min_ok_fraction:
-            error = f"too little good data: {quality.ok_fraction:.0%} ok < {ic.min_ok_fraction:.0%}"
+            error = f"{SKIPPED_TOO_LITTLE_DATA}: {quality.ok_fraction:.0%} ok < {ic.min_ok_fraction:.0%}"
             self.metrics.ident_runs.labels("skipped").inc()
         else:
             from fcrlive.daemon.worker import window_signals
