@@ -19,12 +19,14 @@ from pathlib import Path
 import numpy as np
 
 from fcrlive.daemon.broker import start_broker
-from fcrlive.daemon.config import MqttConfig, load_register_map
-from fcrlive.daemon.modbus_source import ModbusParams, ModbusSource
-from fcrlive.daemon.modbus_testserver import RegisterServer
+from fcrlive.daemon.config import MqttConfig
+from fcrlive.daemon.modbus_source import ModbusSource
 from fcrlive.daemon.mqtt import MqttPublisher
 from fcrlive.daemon.sample import Quality, Sample
 from fcrlive.daemon.store import SampleWriter, connect, read_window
+from fcrlive.modbus.client import ModbusParams
+from fcrlive.modbus.mapfile import load_register_map
+from testsupport.modbus_server import RegisterServer
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -161,6 +163,7 @@ path = "{Path(d) / 's.sqlite'}"
 [identification]
 every_min = {every_min}
 window_min = {2 * every_min}
+device_speed = {speed}
 min_ok_fraction = 0.5
 [mqtt]
 host = "127.0.0.1"
@@ -224,10 +227,10 @@ enabled = false
 def main(argv: list[str] | None = None) -> None:
     import argparse
 
-    ap = argparse.ArgumentParser(prog="bench_daemon")
+    ap = argparse.ArgumentParser(prog="bench_daemon", description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="shorter runs (30 s daemon)")
     ap.add_argument("--daemon-seconds", type=float, default=120.0)
-    args = ap.parse_args(argv or [])
+    args = ap.parse_args(argv)
     asyncio.run(bench_modbus(50.0, 10.0))
     asyncio.run(bench_modbus(25.0, 5.0))
     bench_store()

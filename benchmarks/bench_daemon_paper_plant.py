@@ -7,7 +7,7 @@ simulated governor (real Modbus server) + a real broker + ``fcrlive run`` with t
 excitation and the plant description, one window (10 min by default), and prints what an MQTT subscriber
 received against the plant's truth, with the sample interval and data quality the daemon saw.
 
-``python -m benchmarks daemon_paper_plant`` (about window + 2 min of wall time).
+``python -m benchmarks daemon_paper_plant [--window-min 10]`` (about window + 2 min of wall time).
 """
 
 from __future__ import annotations
@@ -24,51 +24,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-CONFIG = """
-[unit]
-name = "P1"
-rated_mw = 300.0
-f0 = 50.0
-kd = 0.1
-plant = "{plant}"
-
-[source.modbus]
-host = "127.0.0.1"
-port = {port}
-register_map = "{regmap}"
-poll_hz = 50.0
-
-[store]
-path = "{store}"
-
-[identification]
-every_min = {window}
-window_min = {window}
-min_ok_fraction = 0.5
-
-[mqtt]
-host = "127.0.0.1"
-port = {mqtt_port}
-
-[metrics]
-enabled = false
-
-[excitation]
-enabled = true
-period_s = 0.1
-[excitation.limits]
-holdoff_s = 1.0
-[excitation.generator]
-kind = "white"
-seed = 7
-"""
-
-
 async def run(window_min: float) -> None:
     import sim_device
     from fcrlive.daemon.broker import start_broker
-    from fcrlive.daemon.mqtt import first_identification
     from fcrlive.plant.description import load_plant
+    from testsupport.daemon_config import daemon_toml
+    from testsupport.mqtt import first_identification
 
     with tempfile.TemporaryDirectory() as td:
         tmp = Path(td)
@@ -80,8 +41,11 @@ async def run(window_min: float) -> None:
             truth = await asyncio.to_thread(gov.truth, True)
             cfg = tmp / "c.toml"
             regmap = ROOT / "sim_device" / "registers.toml"
-            cfg.write_text(CONFIG.format(plant=plant_file, port=gov.port, regmap=regmap,
-                                         store=tmp / "s.sqlite", window=window_min, mqtt_port=broker.port))
+            cfg.write_text(daemon_toml(unit="P1", plant=plant_file, port=gov.port, regmap=regmap,
+                                       poll_hz=50.0, store=tmp / "s.sqlite",
+                                       identification={"every_min": window_min, "window_min": window_min,
+                                                       "min_ok_fraction": 0.5},
+                                       mqtt={"port": broker.port}, excitation_period_s=0.1))
             log = tmp / "daemon.log"
             env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
             proc = subprocess.Popen([sys.executable, "-m", "fcrlive.cli", "run", "--config", str(cfg)],
@@ -114,9 +78,9 @@ async def run(window_min: float) -> None:
 def main(argv: list[str] | None = None) -> None:
     # pymodbus dumps its last frames with every error, e.g. a send cancelled at shutdown
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL + 1)
-    ap = argparse.ArgumentParser(prog="bench_daemon_paper_plant")
+    ap = argparse.ArgumentParser(prog="bench_daemon_paper_plant", description=__doc__.split("\n\n")[0])
     ap.add_argument("--window-min", type=float, default=10.0)
-    args = ap.parse_args(argv or [])
+    args = ap.parse_args(argv)
     asyncio.run(run(args.window_min))
 
 

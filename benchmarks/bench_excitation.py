@@ -34,15 +34,15 @@ def _fmt(c: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(prog="bench_excitation")
+    ap = argparse.ArgumentParser(prog="bench_excitation", description=__doc__.split("\n\n")[0])
     ap.add_argument("--minutes", type=float, default=60.0, help="simulated minutes per run")
     ap.add_argument("--speed", type=float, default=60.0)
     ap.add_argument("--seed", type=int, default=0, help="plant noise seed (both runs)")
-    args = ap.parse_args(argv or [])
+    args = ap.parse_args(argv)
     logging.basicConfig(level=logging.ERROR)
     from threadpoolctl import threadpool_limits
 
-    from fcrlive.excitation import study
+    from testsupport import excitation_study as study
 
     dur = 60.0 * args.minutes
     exc = asyncio.run(study.accelerated_run(dur, speed=args.speed, excitation=True, seed=args.seed))

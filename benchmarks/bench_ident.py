@@ -28,8 +28,8 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
 
+from fcrlive.constants import Z95  # noqa: E402
 from fcrlive.ident import IdData, arx, bj  # noqa: E402
-from fcrlive.ident.freqresp import Z95  # noqa: E402
 from fcrlive.ident.testsystems import bj_model, simulate_closed_loop, simulate_open_loop  # noqa: E402
 
 # ----------------------------------------------------------------------------- calibration case
@@ -189,7 +189,7 @@ def speed(repeats: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(prog="bench_ident", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="bench_ident", description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=200, help="calibration Monte Carlo runs")
     ap.add_argument("--hard-runs", type=int, default=50, help="robustness runs")
     ap.add_argument("--repeats", type=int, default=21, help="timing repeats")

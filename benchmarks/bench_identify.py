@@ -1,10 +1,14 @@
 """identify: time of a full re-identification of a 30-min window at 10 Hz (every applicable method +
 assessment, one core) and accuracy vs the analytic truth per method on a few seeds (50 Hz logs).
 
-``python -m benchmarks identify [--seeds N] [--repeat R] [--windows W] [--coverage M]``
+``python -m benchmarks identify [--seeds N] [--repeat R] [--windows W] [--zu60 R] [--coverage M]``
+(``--seeds 0 --windows 0 --coverage 0`` for the timing alone).
 
 ``--windows W``: the same timing on W other windows (seeds 101..): a window's time depends on how many
 restarts its fits take, so one window is not the whole story.
+
+``--zu60 R``: Z_u on a 60-min record at 50 Hz without excitation (the longest record docs/identify.md
+quotes), R times, median and min.
 
 ``--coverage M``: over M seeds, how often each 95 % interval holds the truth (nominal 0.95), per method,
 with the mean error and its seed-to-seed sd.
@@ -40,24 +44,47 @@ def _cases10(sig10):
     }
 
 
-def _times(sig, method: str, kd: float, repeat: int) -> list[float]:
+def _plant_kw(method: str) -> dict:
+    """Z_cu gets the plant description (its controller), as the daemon's [unit] plant gives it: identified
+    from a 10 Hz log of the 50 Hz governor the controller does not fit (analysis.controller) and Z_cu would
+    stop there."""
+    from fcrlive.plant.params import preset
+
+    return {"plant": preset("paper-plant1")} if method == "zcu" else {}
+
+
+def _times(sig, method: str, kd: float, repeat: int) -> tuple[list[float], list[float]]:
+    """Wall-clock and CPU times [s] of ``repeat`` identifications (the CPU time of this one-thread
+    process is what other work on a shared machine disturbs least)."""
     from fcrlive.analysis.identify import identify_signals
 
-    ts = []
+    wall, cpu = [], []
     for _ in range(repeat):
-        t0 = time.perf_counter()
-        identify_signals(sig, rated_mw=300.0, kd=kd, method=method)
-        ts.append(time.perf_counter() - t0)
-    return ts
+        t0, c0 = time.perf_counter(), time.process_time()
+        identify_signals(sig, rated_mw=300.0, kd=kd, method=method, **_plant_kw(method))
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    return wall, cpu
+
+
+def _stats(wall: list[float], cpu: list[float], unit: str = "s") -> str:
+    k = 1e3 if unit == "ms" else 1.0
+    nd = 0 if unit == "ms" else 2
+    return (f"median {k * np.median(wall):.{nd}f} {unit} (min {k * min(wall):.{nd}f} {unit}); "
+            f"CPU median {k * np.median(cpu):.{nd}f} {unit} (min {k * min(cpu):.{nd}f} {unit})")
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(prog="bench_identify")
-    ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("--repeat", type=int, default=5)
-    ap.add_argument("--windows", type=int, default=10)
-    ap.add_argument("--coverage", type=int, default=20)
-    args = ap.parse_args(argv or [])
+    ap = argparse.ArgumentParser(prog="bench_identify", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", type=int, default=3, help="accuracy on seeds 0..N-1 (3; 0 skips)")
+    ap.add_argument("--repeat", type=int, default=5,
+                    help="timed runs of the 30-min window, all methods and per method (5)")
+    ap.add_argument("--windows", type=int, default=10, help="timing on this many other windows (10; 0 skips)")
+    ap.add_argument("--zu60", type=int, default=3, metavar="R",
+                    help="time Z_u on a 60-min 50 Hz record R times (3; 0 skips)")
+    ap.add_argument("--coverage", type=int, default=20,
+                    help="interval coverage over this many seeds (20; 0 skips)")
+    args = ap.parse_args(argv)
     from threadpoolctl import threadpool_limits
 
     from fcrlive.analysis.identify import identify_signals
@@ -75,35 +102,40 @@ def main(argv: list[str] | None = None) -> None:
         sig10 = _signals(100, True, 1800.0, 0.1)
         cases = _cases10(sig10)
         for m, s in cases.items():  # imports and first-call set-up out of the timing
-            identify_signals(s, rated_mw=300.0, kd=kd, method=m)
-        total = []
+            identify_signals(s, rated_mw=300.0, kd=kd, method=m, **_plant_kw(m))
+        total, total_cpu = [], []
         for _ in range(args.repeat):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             for m, s in cases.items():
-                identify_signals(s, rated_mw=300.0, kd=kd, method=m)
+                identify_signals(s, rated_mw=300.0, kd=kd, method=m, **_plant_kw(m))
             total.append(time.perf_counter() - t0)
+            total_cpu.append(time.process_time() - c0)
         print(
-            f"30-min window at 10 Hz, zcu + zur + zu + assessment: median {np.median(total):.2f} s "
-            f"(min {min(total):.2f} s) over {args.repeat} runs, 1 thread"
+            f"30-min window at 10 Hz, zcu + zur + zu + assessment: {_stats(total, total_cpu)} "
+            f"over {args.repeat} runs, 1 thread"
         )
         for m, s in cases.items():
-            ts = _times(s, m, kd, args.repeat)
-            print(f"  {m}: median {1e3 * np.median(ts):.0f} ms (min {1e3 * min(ts):.0f} ms)")
+            print(f"  {m}: {_stats(*_times(s, m, kd, args.repeat), unit='ms')}")
         if args.windows:
             per = {m: [] for m in cases}
             for seed in range(101, 101 + args.windows):
                 for m, s in _cases10(_signals(seed, True, 1800.0, 0.1)).items():
-                    per[m].append(min(_times(s, m, kd, 2)))
+                    per[m].append(min(_times(s, m, kd, 2)[0]))
             tot = np.sum(list(per.values()), axis=0)
             print(
                 f"  {args.windows} other windows (seeds 101-{100 + args.windows}), all three: mean "
                 f"{tot.mean():.2f} s, max {tot.max():.2f} s ("
                 + ", ".join(f"{m} mean {1e3 * np.mean(v):.0f} ms" for m, v in per.items()) + ")"
             )
-        print(
-            f"\naccuracy vs truth (droop {true['droop']:.4f}, max|G_1| {true['max_g1']:.4f}, "
-            f"max|S| {true['max_s']:.4f}); 30 min, 12 dB, 50 Hz logs; * = truth inside the 95 % interval"
-        )
+        if args.zu60:
+            quiet60 = _signals(100, False, 3600.0, None)
+            print(f"  zu on a 60-min record at 50 Hz: {_stats(*_times(quiet60, 'zu', kd, args.zu60))} "
+                  f"over {args.zu60} runs")
+        if args.seeds:
+            print(
+                f"\naccuracy vs truth (droop {true['droop']:.4f}, max|G_1| {true['max_g1']:.4f}, "
+                f"max|S| {true['max_s']:.4f}); 30 min, 12 dB, 50 Hz logs; * = truth inside the 95 % interval"
+            )
         for seed in range(args.seeds):
             exc = _signals(seed, True, 1800.0, None)
             quiet = _signals(seed, False, 900.0, None)
@@ -170,4 +202,6 @@ def coverage(n_seeds: int, true: dict, kd: float, methods=("zcu", "zur", "zu")) 
 
 
 if __name__ == "__main__":
-    main()
+    import sys
+
+    main(sys.argv[1:])

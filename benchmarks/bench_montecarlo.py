@@ -6,7 +6,7 @@ runs, each simulated as one batch, then identified run by run); ``--runs 1000`` 
 Prints the per-run cost split between simulation (one process) and identification (one process).
 
 Run with ``python -m benchmarks montecarlo`` (defaults) or
-``python -m benchmarks.bench_montecarlo [--runs N] [--workers W] [--method zcu|zur|zu|sine]``.
+``python -m benchmarks montecarlo [--runs N] [--workers W] [--method zcu|zur|zu|sine]``.
 """
 
 from __future__ import annotations
@@ -15,14 +15,15 @@ import argparse
 import tempfile
 import time
 
-from fcrlive.analysis.montecarlo import StudyConfig, run_study
+from fcrlive.analysis.montecarlo.config import StudyConfig
+from fcrlive.analysis.montecarlo.runner import run_study
 from fcrlive.plant.params import preset
 
 TARGET_S = 300.0
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(prog="bench_montecarlo")
+    ap = argparse.ArgumentParser(prog="bench_montecarlo", description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=200)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--method", default="zcu", choices=["zcu", "zur", "zu", "sine"])

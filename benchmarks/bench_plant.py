@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import time
 
 import numpy as np
@@ -17,6 +18,9 @@ def _best(fn, repeat: int = 20) -> float:
 
 
 def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(prog="bench_plant", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeat", type=int, default=20, help="best of this many calls per figure (20)")
+    args = ap.parse_args(argv)
     t0 = time.perf_counter()
     import control  # noqa: F401
 
@@ -27,13 +31,14 @@ def main(argv: list[str] | None = None) -> None:
     plant = preset("paper-plant1")
     tfs = analytic(plant)
     w = np.geomspace(1e-4, 100, 1000)
-    print(f"analytic(): {1e3 * _best(lambda: analytic(plant)):.1f} ms")
-    print(f"freqresp G_1(s), 1000 points: {1e3 * _best(lambda: freqresp(tfs.G_1, w)):.2f} ms")
-    t_z = _best(lambda: freqresp(tfs.discrete.G_1, w))
+    n = args.repeat
+    print(f"analytic(): {1e3 * _best(lambda: analytic(plant), n):.1f} ms")
+    print(f"freqresp G_1(s), 1000 points: {1e3 * _best(lambda: freqresp(tfs.G_1, w), n):.2f} ms")
+    t_z = _best(lambda: freqresp(tfs.discrete.G_1, w), n)
     print(f"freqresp G_1(z) (state space), 1000 points: {1e3 * t_z:.2f} ms")
     print(
-        f"peak(G_1): {1e3 * _best(lambda: peak(tfs.G_1), 5):.1f} ms; peak(G_1(z)): "
-        f"{1e3 * _best(lambda: peak(tfs.discrete.G_1), 5):.1f} ms"
+        f"peak(G_1): {1e3 * _best(lambda: peak(tfs.G_1), max(1, n // 4)):.1f} ms; peak(G_1(z)): "
+        f"{1e3 * _best(lambda: peak(tfs.discrete.G_1), max(1, n // 4)):.1f} ms"
     )
     for hold in ("zoh", "foh"):
         t = analytic(plant, u_hold=hold)

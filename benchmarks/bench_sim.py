@@ -43,7 +43,7 @@ def _single(plant: Plant, cfg: SimConfig, repeat: int = 3) -> tuple[float, float
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(prog="bench_sim")
+    ap = argparse.ArgumentParser(prog="bench_sim", description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=1000)
     ap.add_argument("--chunk", type=int, default=500)
     ap.add_argument("--duration", type=float, default=1800.0)

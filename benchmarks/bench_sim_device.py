@@ -96,7 +96,7 @@ async def _bench(speed: float, seconds: float, idle_s: float) -> dict:
 
 
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(prog="bench_sim_device", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="bench_sim_device", description=__doc__.split("\n\n")[0])
     p.add_argument("--speed", type=float, default=60.0)
     p.add_argument("--seconds", type=float, default=5.0, help="polling phase [wall s]")
     p.add_argument("--idle", type=float, default=3.0, help="idle phase [wall s]")

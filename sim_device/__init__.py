@@ -7,6 +7,6 @@ frames are ``fcrlive_sim.dbc``.
 
 from sim_device.device import SimGovernor
 from sim_device.faults import FaultInjector, FaultState
-from sim_device.registers import Point, RegisterMap, load_map
+from sim_device.registers import load_map
 
-__all__ = ["FaultInjector", "FaultState", "Point", "RegisterMap", "SimGovernor", "load_map"]
+__all__ = ["FaultInjector", "FaultState", "SimGovernor", "load_map"]

@@ -104,6 +104,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FILE.toml",
         help="write the effective register map (word order, unit id) to FILE and continue",
     )
+    p.add_argument(
+        "--buffer-slots",
+        type=int,
+        metavar="N",
+        help="slots of the ring buffer of controller samples, a power of two <= 4096 (default: the map's, "
+        "more when accelerated: 4 wall seconds)",
+    )
     p.add_argument("--duration", type=_positive("duration"), help="stop after this many wall seconds")
     p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     f = p.add_argument_group("fault injection")
@@ -183,6 +190,7 @@ async def _run(args) -> int:
         can_channel=args.can,
         can_interface=args.can_interface,
         can_kwargs={"port": args.can_port} if args.can_port else None,
+        buffer_slots=args.buffer_slots,
     )
     if args.write_map:
         try:

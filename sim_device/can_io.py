@@ -19,11 +19,13 @@ from pathlib import Path
 import can
 import cantools
 
+from fcrlive.canbus import close_bus
 from fcrlive.errors import ConfigError
 
 DBC_PATH = Path(__file__).with_name("fcrlive_sim.dbc")
 TX_ORDER = ("GOV_Counter", "GOV_Time", "GOV_Speed", "GOV_Power", "GOV_Gate", "GOV_Excitation")
 CMD_MESSAGE = "GOV_ExcitationCmd"
+SAMPLE_MESSAGE = "GOV_Sample"
 INTERFACES = ("virtual", "udp_multicast", "socketcan")
 
 log = logging.getLogger("sim_device.can")
@@ -62,6 +64,7 @@ class CanLink:
         self.db = load_dbc(dbc_path)
         self._tx = [self.db.get_message_by_name(n) for n in TX_ORDER]
         self._cmd = self.db.get_message_by_name(CMD_MESSAGE)
+        self._sample = next((m for m in self.db.messages if m.name == SAMPLE_MESSAGE), None)
         self._on_command = on_command
         self.bus: can.BusABC | None = None
         self._notifier: can.Notifier | None = None
@@ -74,12 +77,8 @@ class CanLink:
         self._notifier = can.Notifier(self.bus, [self._on_message], timeout=0.1, loop=loop)
 
     def close(self) -> None:
-        if self._notifier is not None:
-            self._notifier.stop(timeout=1.0)
-            self._notifier = None
-        if self.bus is not None:
-            self.bus.shutdown()
-            self.bus = None
+        close_bus(self._notifier, self.bus)
+        self._notifier = self.bus = None
 
     def send_snapshot(self, values: dict[str, float]) -> None:
         """One burst of frames for one controller sample (values keyed by signal name)."""
@@ -95,6 +94,22 @@ class CanLink:
                 self.send_errors += 1
                 if self.send_errors in (1, 10, 100, 1000):
                     log.warning("CAN send failed (%d so far): %s", self.send_errors, exc)
+
+    def send_sample(self, counter: int, fields: tuple[str, ...], values: tuple[float, ...]) -> None:
+        """One CAN FD frame ``GOV_Sample`` per controller sample (rolling counter; buffered acquisition)."""
+        if self.bus is None or self._sample is None:
+            return
+        sig = {"seq_counter": counter, **{f"seq_{f}": v for f, v in zip(fields, values, strict=True)}}
+        try:
+            data = self._sample.encode({s.name: sig.get(s.name, 0.0) for s in self._sample.signals},
+                                       strict=False)
+            self.bus.send(can.Message(arbitration_id=self._sample.frame_id, data=data, is_fd=True,
+                                      is_extended_id=False))
+            self.frames_sent += 1
+        except (can.CanError, ValueError) as exc:
+            self.send_errors += 1
+            if self.send_errors in (1, 10, 100, 1000):
+                log.warning("CAN FD sample frame failed (%d so far): %s", self.send_errors, exc)
 
     def _on_message(self, msg: can.Message) -> None:
         if msg.arbitration_id != self._cmd.frame_id or msg.is_extended_id or msg.is_error_frame:

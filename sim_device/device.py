@@ -4,6 +4,8 @@
 ``dt``, ``step(r)`` and ``reset()``) on absolute wall-clock deadlines, ``speed`` simulated seconds per wall
 second, in batches of whole controller samples. After each batch the latest sample is written into the
 input-register block in one synchronous operation, so one FC4 read of the block is one consistent snapshot.
+Every sample of a batch also enters the ring buffer of controller samples (``sim_device/ringbuffer.py``,
+docs/buffered-acquisition.md), whatever the speed and the machine's load.
 
 Device-side safety, as a real governor would be configured:
 - the excitation offset is clamped to ±``excitation_limit_hz``; NaN/inf writes count as 0 (and are counted);
@@ -31,9 +33,13 @@ from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from fcrlive.errors import ConfigError, UserError
+from fcrlive.modbus.registers import RegisterMap
 from sim_device.can_io import CanLink
 from sim_device.faults import FaultInjector
-from sim_device.registers import RegisterMap, load_map
+from sim_device.profiles import HOLDING_POINTS as TEST_POINTS
+from sim_device.profiles import TestProfileRunner
+from sim_device.registers import load_map
+from sim_device.ringbuffer import slot_values
 
 log = logging.getLogger("sim_device")
 
@@ -41,6 +47,7 @@ STATUS_FCR_N_ACTIVE = 1 << 0
 STATUS_NORMAL_OPERATION = 1 << 1
 STATUS_EXCITATION_ACCEPTED = 1 << 2
 STATUS_HEARTBEAT_OK = 1 << 3
+STATUS_TEST_PROFILE = 1 << 4
 
 HEARTBEAT_AGE_CAP_S = 1e6
 NAN_POINTS = ("speed", "grid_freq", "power", "mech_power", "controller_output", "guide_vane", "control_error")
@@ -116,6 +123,8 @@ class SimGovernor:
         max_lag_s: float = 0.5,
         on_sample: Callable[[Any], None] | None = None,
         sim_kwargs: dict | None = None,
+        buffer_slots: int | None = None,
+        buffer_counter_start: int = 0,
     ):
         if not (isinstance(speed, int | float) and math.isfinite(speed) and speed > 0):
             raise ConfigError(f"speed must be a positive number, not {speed!r}")
@@ -161,6 +170,7 @@ class SimGovernor:
         self.can_interface = can_interface
         self.can_kwargs = dict(can_kwargs or {})
         self.can: CanLink | None = None
+        self.ring = self._make_ring(buffer_slots, buffer_counter_start)
 
         self._server: ModbusTcpServer | None = None
         self._clock_task: asyncio.Task | None = None
@@ -181,6 +191,30 @@ class SimGovernor:
 
         return RealtimeSimulator(self.plant, seed=self.seed, snr_db=self.snr_db, **kwargs)
 
+    def _make_ring(self, slots: int | None, counter_start: int):
+        """The ring buffer of every controller sample, when the map has a ``[buffer]`` (ringbuffer.py)."""
+        layout = self.register_map.buffer
+        if layout is None:
+            return None
+        from sim_device.ringbuffer import SLOT_FIELDS, RingBuffer, slots_for
+
+        unknown = [f for f in layout.fields if f not in SLOT_FIELDS]
+        if unknown:
+            raise ConfigError(f"buffer fields {', '.join(unknown)}: the simulator has only "
+                              f"{', '.join(SLOT_FIELDS)}")
+
+        n = slots if slots is not None else slots_for(self.speed, self.dt, layout.slots)
+        try:
+            layout = layout.with_slots(int(n))
+        except ValueError as exc:
+            raise ConfigError(f"buffer: {exc}") from None
+        return RingBuffer(layout, self.dt, self.register_map.word_order, counter_start,
+                          on_sample=self._can_sample)
+
+    def _can_sample(self, counter: int, values: tuple[float, ...]) -> None:
+        if self.can is not None:
+            self.can.send_sample(counter, self.ring.layout.fields, values)
+
     def _reset_state(self) -> None:
         self.sample_counter = 0
         self.last_sample: Any = None
@@ -193,6 +227,8 @@ class SimGovernor:
         self.heartbeat_timeouts = 0
         self._applied_hz = 0.0
         self._published: dict[str, float] | None = None
+        # TR test profiles in the applied-frequency mode (sim_device/profiles.py)
+        self.test_profile = TestProfileRunner(self.dt, self.f0)
 
     def _build_simdevice(self) -> list[SimDevice]:
         m = self.register_map
@@ -201,6 +237,7 @@ class SimGovernor:
             "heartbeat_timeout": self.heartbeat_timeout_s,
             "rated_power": self.rated_mw,
             "nominal_freq": self.f0,
+            "test_period": self.test_profile.period_s,
         }
         holding = [
             SimData(
@@ -215,6 +252,9 @@ class SimGovernor:
             SimData(address=p.address, values=m.encode(p, 0), datatype=DataType.REGISTERS)
             for p in m.table("input")
         ]
+        if self.ring is not None:
+            lo, count = self.ring.span()
+            inputs.append(SimData(address=lo, count=count, values=0, datatype=DataType.REGISTERS))
         # pymodbus needs a non-empty coil and discrete-input block in non-shared mode; the action
         # hook refuses every bit function (ILLEGAL_FUNCTION): this device has no coils.
         bits = [SimData(address=0, values=[False] * 16, datatype=DataType.BITS)]
@@ -274,6 +314,9 @@ class SimGovernor:
         except RuntimeError:
             raise PortInUseError(f"cannot listen on {self.host}:{self.port}") from None
         self._server = server
+        if self.ring is not None:
+            start, _count, regs, _flags = server.context.devices[self.register_map.unit_id].block["i"]
+            self.ring.attach(regs, start)
         sockets = getattr(server.transport, "sockets", None) or []
         if sockets:
             self.port = sockets[0].getsockname()[1]
@@ -301,6 +344,8 @@ class SimGovernor:
         await self._stop_server()
         self._sim.reset()
         self._reset_state()
+        if self.ring is not None:
+            self.ring.reset()
         await asyncio.sleep(max(0.0, downtime_s))
         await self._start_server()
         if self._running:
@@ -361,11 +406,25 @@ class SimGovernor:
         r = self._applied_hz / self.f0
         step = self._sim.step
         cb = self.on_sample
+        tp = self.test_profile
+        ring = self.ring
+        if ring is not None and self.faults.state.freeze:  # the controller counts on, the ring stands still
+            ring.skip(n)
+            ring = None
+        if ring is not None:
+            values = slot_values(ring.layout.fields, frozenset(NAN_POINTS) if self.faults.state.nan else
+                                 frozenset())
+        applied = self._applied_hz
         s = None
         for _ in range(n):
-            s = step(r)
+            app = tp.next_applied_hz() if tp.active else None
+            s = step(r) if app is None else step(r, applied_hz=app)
             if cb is not None:
                 cb(s)
+            if ring is not None:  # every controller sample, not only the last of the batch
+                ring.push(values(s, applied))
+        if ring is not None:
+            ring.commit()
         self.sample_counter += n
         self.last_sample = s
 
@@ -379,6 +438,7 @@ class SimGovernor:
         return self._offset_hz if (self._enable and self.heartbeat_ok()) else 0.0
 
     def _safety_check(self) -> None:
+        self.test_profile.check_heartbeat(self.heartbeat_ok())
         if self._offset_hz != 0.0 and not self.heartbeat_ok():
             log.warning("heartbeat lost for > %.3f s: excitation offset reset to 0", self.heartbeat_timeout_s)
             self._offset_hz = 0.0
@@ -424,7 +484,10 @@ class SimGovernor:
                 status |= STATUS_EXCITATION_ACCEPTED
         age = HEARTBEAT_AGE_CAP_S if self._hb_last is None else min(now - self._hb_last, HEARTBEAT_AGE_CAP_S)
         n = self.sample_counter - 1  # index of the published sample: 0 = the first after (re)start
+        if self.test_profile.active:
+            status |= STATUS_TEST_PROFILE
         v = {
+            **self.test_profile.values(),
             "sample_counter": n & 0xFFFFFFFF,
             "device_time": n * self.dt,
             "status": status,
@@ -538,6 +601,10 @@ class SimGovernor:
             if not p.writable or p.address < address or p.end > end:
                 return ExcCodes.ILLEGAL_ADDRESS  # read-only point, or only part of a multi-register point
         new = {p.name: m.decode(p, values[p.address - address : p.end - address]) for p in touched}
+        if any(k in new for k in TEST_POINTS):
+            refused = self.test_profile.write(new, self.heartbeat_ok())
+            if refused is not None:
+                return refused
         enable = new.get("excitation_enable")
         if enable is not None and enable not in (0, 1):
             return ExcCodes.ILLEGAL_VALUE

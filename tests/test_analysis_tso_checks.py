@@ -178,3 +178,76 @@ def test_wide_band_margin_reported_and_selectable():
     assert any("outside the tested band" in n for n in v.notes)
     vw = tc.assess_tso(tc.delay(1.0), products=("fcrn",), margin_scope="wide")["fcrn"]
     assert not vw.passed and any("Req. 8" in r for r in vw.reasons)
+
+
+# --------------------------------------------------------------------------------------------------
+# decision: pass / fail / undecided with the uncertainty of F
+
+
+def _delayed_lag(tau: float, T: float):
+    return lambda w: tc.delay(tau)(w) * tc.rational([1.0], [T, 1.0])(w)
+
+
+def _rel_sd(F, s: float):
+    return lambda w: s * np.abs(F(w))
+
+
+def test_decision_undecided_when_the_margin_interval_straddles_the_limit():
+    F = _delayed_lag(1.0, 1.0)  # FCR-D band margin 0.457 against 0.4085
+    v = tc.assess_tso(F, products=("fcrd",), F_sd=_rel_sd(F, 0.1))["fcrd"]
+    lo, m, hi = v.stability_margin_band_lower, v.stability_margin_band, v.stability_margin_band_upper
+    assert lo < v.stability_threshold <= m < hi
+    assert v.passed and v.passed_at_bound is False
+    assert v.decision == "undecided"
+    # the optimistic bounds sit on the other side of the point values
+    assert v.performance_ratio_lower < v.performance_ratio < v.performance_ratio_upper
+    assert v.k_red_dyn_lower <= v.k_red_dyn <= v.k_red_dyn_upper
+
+
+def test_decision_pass_and_fail_when_the_interval_is_clear_of_the_limit():
+    F = _delayed_lag(1.0, 1.0)
+    v = tc.assess_tso(F, products=("fcrd",), F_sd=_rel_sd(F, 0.02))["fcrd"]
+    assert v.stability_margin_band_lower >= v.stability_threshold
+    assert v.decision == "pass" and v.passed_at_bound is True
+    F = _delayed_lag(1.0, 3.0)  # band margin 0.234: fails
+    v = tc.assess_tso(F, products=("fcrd",), F_sd=_rel_sd(F, 0.1))["fcrd"]
+    assert v.stability_margin_band_upper < v.stability_threshold
+    assert not v.passed and v.decision == "fail"
+    # a wider interval reaching over the limit: no longer a sure fail
+    v = tc.assess_tso(F, products=("fcrd",), F_sd=_rel_sd(F, 0.3))["fcrd"]
+    assert v.stability_margin_band_upper >= v.stability_threshold
+    assert not v.passed and v.decision == "undecided"
+
+
+def test_decision_encirclement_fails_only_when_no_f_in_the_interval_reaches_minus_one():
+    F = _delayed_lag(3.0, 1.0)  # band margin fine, but the Nyquist curve encircles −1
+    v = tc.assess_tso(F, products=("fcrd",), F_sd=_rel_sd(F, 0.1))["fcrd"]
+    # the band margin alone would leave it undecided: the encirclement decides
+    assert v.closed_loop_stable is False
+    assert v.stability_margin_band_lower < v.stability_threshold < v.stability_margin_band_upper
+    assert v.stability_margin_wide_lower > 0
+    assert v.decision == "fail"
+    v = tc.assess_tso(F, products=("fcrd",), F_sd=_rel_sd(F, 0.3))["fcrd"]
+    assert v.stability_margin_wide_lower < 0 and v.decision == "undecided"
+    # samples: fail when every sample is unstable, undecided when some are stable
+    unstable = [_delayed_lag(t, 1.0) for t in (2.9, 3.0, 3.1)]
+    v = tc.assess_tso(F, products=("fcrd",), F_samples=unstable)["fcrd"]
+    assert v.closed_loop_stable_fraction == 0.0 and v.decision == "fail"
+    mixed = [*unstable, _delayed_lag(0.5, 1.0)]
+    v = tc.assess_tso(F, products=("fcrd",), F_samples=mixed)["fcrd"]
+    assert 0 < v.closed_loop_stable_fraction < 1 and v.decision == "undecided"
+
+
+def test_decision_undecided_when_the_bounds_are_unknown():
+    F = _delayed_lag(1.0, 1.0)
+    v = tc.assess_tso(F, products=("fcrd",), F_sd=lambda w: np.full(np.shape(w), np.nan))["fcrd"]
+    assert v.passed and v.passed_at_bound is None and v.decision == "undecided"
+
+
+def test_decision_of_an_exact_f_is_the_point_verdict():
+    v = tc.assess_tso(one)
+    assert all(x.decision == "pass" and x.passed_at_bound is None for x in v.values())
+    v = tc.assess_tso(_delayed_lag(1.0, 3.0), products=("fcrd",))["fcrd"]
+    assert not v.passed and v.decision == "fail" and v.stability_margin_band_upper is None
+    v = tc.assess_tso(_delayed_lag(3.0, 1.0), products=("fcrd",))["fcrd"]
+    assert v.closed_loop_stable is False and v.decision == "fail"

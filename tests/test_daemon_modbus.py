@@ -10,11 +10,12 @@ from pathlib import Path
 
 import pytest
 
-from fcrlive.daemon.config import load_register_map
-from fcrlive.daemon.modbus_source import ModbusParams, ModbusSource
-from fcrlive.daemon.modbus_testserver import RegisterServer
-from fcrlive.daemon.registers import RegisterMap, RegisterPoint
+from fcrlive.daemon.modbus_source import ModbusSource
 from fcrlive.daemon.sample import Quality
+from fcrlive.modbus.client import ModbusParams
+from fcrlive.modbus.mapfile import load_register_map
+from fcrlive.modbus.registers import RegisterMap, RegisterPoint
+from testsupport.modbus_server import RegisterServer
 
 ROOT = Path(__file__).resolve().parents[1]
 

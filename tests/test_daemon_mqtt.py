@@ -26,10 +26,13 @@ from fcrlive.daemon.payloads import (
 
 
 def _result(t=1000.0, droop=4.0):
+    from tests_daemon_support import report
+
+    d = droop / 100.0  # the report's droop is a fraction, published in %
     return ResultPayload(
         unit="G1", t=t, t_iso="x", window=Window.of(t - 1800, t), method="auto", ok=True, duration_s=0.1,
         quality=DataQuality(ok_fraction=0.99, samples=100, expected=101, counts={"ok": 99}, gaps=0, gap_s=0),
-        result={"droop": {"value": droop, "std": 0.1}, "max_abs_s": 1.3, "tso": {"fcrn": {"passed": True}}})
+        result=report(droop=d, droop_ci95=(d - 0.002, d + 0.002), max_abs_s=1.3))
 
 
 async def _collect(port, topic, n=1, timeout=10.0):
@@ -61,7 +64,7 @@ async def test_retained_result_reaches_a_fresh_subscriber(broker):
     assert got["fcrlive/G1/status"] == "online"
     assert json.loads(got["fcrlive/G1/droop"])["value"] == 4.0
     assert json.loads(got["fcrlive/G1/tso/fcrn"])["verdict"] == "pass"
-    assert json.loads(got["fcrlive/G1/result/latest"])["result"]["max_abs_s"] == 1.3
+    assert json.loads(got["fcrlive/G1/result/latest"])["result"]["max_abs_s"]["value"] == 1.3
     # clean exit: the publisher says offline itself
     [(_, status, retained)] = await _collect(broker.port, "fcrlive/G1/status")
     assert status == "offline" and retained

@@ -8,7 +8,7 @@ import struct
 import pytest
 from pymodbus.client import ModbusTcpClient
 
-from fcrlive.daemon.registers import (
+from fcrlive.modbus.registers import (
     ReadBlock,
     RegisterPoint,
     decode_block,

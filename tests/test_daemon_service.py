@@ -36,7 +36,7 @@ async def test_service_end_to_end(tmp_path):
                     "register_map": str(ROOT / "sim_device/registers.toml")}},
                 store={"path": str(tmp_path / "s.sqlite")},
                 identification={"every_min": 0.04, "window_min": 1, "min_ok_fraction": 0.0,
-                                "function": "tests_daemon_support:fake_identify"},
+                                "function": "fcrlive_plugins.testing:fake_identify"},
                 mqtt={"host": "127.0.0.1", "port": broker.port, "stats_interval_s": 1.0},
                 metrics={"enabled": False})
             svc = Service(cfg)
@@ -53,14 +53,14 @@ async def test_service_end_to_end(tmp_path):
             stop.set()
             await asyncio.wait_for(task, 20)
     res = json.loads(seen["fcrlive/G1/result/latest"])
-    assert res["ok"] and res["result"]["n_ok"] > 10 and res["result"]["rated_mw"] == 100.0
+    assert res["ok"] and res["result"]["samples"] > 10 and res["result"]["rated_mw"] == 300.0
     assert json.loads(seen["fcrlive/G1/droop"])["value"] == 4.0
     live = json.loads(seen["fcrlive/G1/live"])
     assert live["signals"]["grid_freq"]["mean"] == pytest.approx(50.0, abs=0.1) and live["rate_hz"] > 5
     con = connect(tmp_path / "s.sqlite", readonly=True)
     n_ok = con.execute("SELECT count(*) FROM samples WHERE quality = 0").fetchone()[0]
     assert n_ok > 25
-    assert read_results(con)[0].result["droop"]["value"] == 4.0
+    assert read_results(con)[0].result["droop"]["value"] == 0.04  # the report: a fraction
     assert read_runs(con)[-1]["clean"] == 1
     assert svc.metrics.samples.labels("ok")._value.get() > 25
 

@@ -127,6 +127,7 @@ async def _start_driver(port: int) -> asyncio.subprocess.Process:
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
     return await asyncio.create_subprocess_exec(
         sys.executable, "-m", "fcrlive.excitation", "--port", str(port), "--register-map", str(MAP_PATH),
+        "--i-understand-this-writes", "--amplitude-hz", "0.1",
         "--period-s", "0.05", "--holdoff-s", "1", "--log-level", "ERROR",
         stdout=asyncio.subprocess.PIPE, cwd=str(ROOT), env=env)
 

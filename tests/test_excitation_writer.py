@@ -12,10 +12,10 @@ import pytest
 from pydantic import ValidationError
 from test_excitation_writer_support import RMAP, governor, make_task, wait_active, wait_zero
 
-from fcrlive.daemon.modbus_source import ModbusParams
 from fcrlive.errors import ConfigError
 from fcrlive.excitation.config import ExcitationSettings
 from fcrlive.excitation.writer import ExcitationFault, ExcitationPoints, ExcitationWriter, ReadbackMismatch
+from fcrlive.modbus.client import ModbusParams
 
 
 def _writer(port, rmap=RMAP, **kw):
@@ -199,7 +199,7 @@ def test_settings_from_toml_build_the_chain():
     assert task.guard.limits.amplitude_hz == 0.08 and task.guard.limits.holdoff_s == 10
     assert task.generator.kind == "prbs" and task.generator.amplitude_hz == 0.08 and task.period_s == 0.05
     assert task.description["seed"] == 7 and task.writer.max_abs_hz == 0.08
-    random_seed = ExcitationSettings(enabled=True).make_generator().seed
+    random_seed = ExcitationSettings(enabled=True, limits={"amplitude_hz": 0.1}).make_generator().seed
     assert isinstance(random_seed, int)  # no seed configured: a random one, recorded in the description
 
 

@@ -8,11 +8,11 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from fcrlive.daemon.config import load_register_map
-from fcrlive.daemon.modbus_source import ModbusParams
 from fcrlive.excitation import GuardLimits, SafetyGuard, WhiteNoiseGenerator
 from fcrlive.excitation.task import ExcitationTask
 from fcrlive.excitation.writer import ExcitationWriter
+from fcrlive.modbus.client import ModbusParams
+from fcrlive.modbus.mapfile import load_register_map
 from sim_device import SimGovernor
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -55,7 +55,9 @@ def test_json_and_auto_method(files, case, capsys):
         assert doc["gp_kind"] == "G_req" and len(doc["gp"]) == 3
     if case in ("zcu", "zur"):
         assert len(doc["gp"]) == 10
-        assert set(doc["droop"]) == {"value", "ci95"}
+        # a reason exactly when the value is null (the guard nulls a droop wider than itself, with why)
+        assert set(doc["droop"]) == {"value", "ci95", "reason"}
+        assert (doc["droop"]["reason"] is None) == (doc["droop"]["value"] is not None)
     if case == "zcu":
         assert set(doc["tso"]) == {"fcrn", "fcrd"}
         assert "pass" in doc["tso"]["fcrn"]

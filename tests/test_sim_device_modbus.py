@@ -19,6 +19,7 @@ import pytest
 from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusIOException
 
+from fcrlive.modbus.registers import RegisterMap
 from fcrlive.plant.params import preset
 from fcrlive.sim.realtime import RealtimeSimulator
 from sim_device import SimGovernor, load_map
@@ -28,7 +29,6 @@ from sim_device.device import (
     STATUS_HEARTBEAT_OK,
     STATUS_NORMAL_OPERATION,
 )
-from sim_device.registers import RegisterMap
 
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
@@ -253,7 +253,7 @@ async def test_refused_writes_and_functions():
         # half a float
         rr = await client.write_register(MAP.point("excitation_offset").address, 0x3F80, device_id=UNIT)
         assert rr.isError() and rr.exception_code == 2
-        for addr in (99, 112, 500, 65000):
+        for addr in (99, 118, 500, 65000):  # 112-117: the test-profile registers
             rr = await client.write_register(addr, 1, device_id=UNIT)
             assert rr.isError() and rr.exception_code == 2, addr
         rr = await client.read_input_registers(IN_START, count=IN_COUNT + 1, device_id=UNIT)

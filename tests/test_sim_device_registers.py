@@ -11,7 +11,9 @@ from pathlib import Path
 import pytest
 
 from fcrlive.errors import ConfigError
-from sim_device.registers import DEFAULT_MAP_PATH, RegisterMap, load_map, parse_map
+from fcrlive.modbus.mapfile import parse_register_map as parse_map
+from fcrlive.modbus.registers import RegisterMap
+from sim_device.registers import DEFAULT_MAP_PATH, load_map
 
 CONTRACT_INPUTS = {
     "sample_counter": "uint32",
@@ -25,6 +27,9 @@ CONTRACT_INPUTS = {
     "excitation_applied": "float32",
 }
 CONTRACT_HOLDING = {"excitation_offset": "float32", "excitation_enable": "uint16", "heartbeat": "uint16"}
+# the test-profile mode (applied frequency, sim_device/profiles.py)
+TEST_HOLDING = {"test_profile": "uint16", "test_command": "uint16", "test_period": "float32",
+                "test_options": "uint16"}
 
 
 def test_shipped_map_keeps_the_contract():
@@ -38,12 +43,13 @@ def test_shipped_map_keeps_the_contract():
     for a, b in itertools.pairwise(pts):
         assert b.address == a.end, (a.name, b.name)
     assert m.span("input") == (0, pts[-1].end) and pts[-1].end <= 125  # one FC4 request
-    # only holding points are writable, and exactly the three commands
-    assert {p.name for p in m.points if p.writable} == set(CONTRACT_HOLDING)
+    # only holding points are writable, and exactly the three commands and the test-profile registers
+    assert {p.name for p in m.points if p.writable} == set(CONTRACT_HOLDING) | set(TEST_HOLDING)
     assert all(p.table == "holding" for p in m.points if p.writable)
     # the raw TOML has exactly the documented keys
     raw = tomllib.loads(DEFAULT_MAP_PATH.read_text())
-    assert set(raw) == {"unit_id", "word_order", "byte_order", "points"}
+    assert set(raw) == {"unit_id", "word_order", "byte_order", "acquisition", "buffer", "points"}
+    assert raw["acquisition"] == "polled" and m.buffer is not None  # buffered: docs/buffered-acquisition.md
     keys = {"name", "table", "address", "type", "scale", "offset", "unit", "writable", "description"}
     assert all(set(p) == keys for p in raw["points"])
 
@@ -133,6 +139,36 @@ def test_to_toml_round_trips(tmp_path):
 def test_bad_maps_are_config_errors(doc, message):
     with pytest.raises(ConfigError, match=re.escape(message)):
         parse_map(doc)
+
+
+_PT = {"name": "a", "table": "input", "address": 0, "type": "uint16"}
+_BUF = {"header_address": 1000, "slots_address": 1016, "slots": 1024}
+
+
+@pytest.mark.parametrize(
+    ("doc", "message"),
+    [
+        ({"acquisition": "buffered", "points": [_PT]}, 'acquisition = "buffered" needs a [buffer] table'),
+        ({"acquisition": "streamed", "points": [_PT]}, "acquisition:"),
+        ({"points": [_PT], "buffer": {**_BUF, "slots": 1000}}, "buffer.slots: must be a power of two"),
+        ({"points": [_PT], "buffer": {**_BUF, "depth": 3}}, "buffer.depth: unknown key"),
+        ({"points": [_PT], "buffer": {**_BUF, "fields": ["power", "power"]}}, "distinct"),
+        ({"points": [_PT], "buffer": {**_BUF, "slots_address": 1004}}, "header and slots overlap"),
+        ({"points": [_PT], "buffer": {**_BUF, "slots": 8192}}, "past register 65535"),
+        ({"points": [{**_PT, "address": 1020}], "buffer": _BUF}, "inside the ring buffer"),
+    ],
+)
+def test_bad_buffers_are_config_errors_of_the_one_map_loader(doc, message):
+    """``acquisition`` and ``[buffer]`` (docs/buffered-acquisition.md) are checked by the map loader the
+    daemon and the simulator share: one line naming the key."""
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        parse_map(doc)
+
+
+def test_buffered_map_round_trips_through_toml():
+    m = parse_map({"acquisition": "buffered", "points": [_PT], "buffer": {**_BUF, "fields": ["power"]}})
+    assert m.acquisition == "buffered" and m.buffer.fields == ("power",) and m.buffer.slot_words == 5
+    assert parse_map(tomllib.loads(m.to_toml())) == m
 
 
 def test_load_map_file_errors(tmp_path):

@@ -42,7 +42,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args._run(args) or 0)
     except UserError as exc:
-        print(f"fcrlive {args.command}: error: {exc}", file=sys.stderr)
+        for line in str(exc).splitlines() or [""]:  # several configuration problems: one line each
+            print(f"fcrlive {args.command}: error: {line}", file=sys.stderr)
         return exc.exit_status
     except KeyboardInterrupt:
         print(f"fcrlive {args.command}: interrupted", file=sys.stderr)

@@ -1,4 +1,4 @@
-"""Constants shared across fcrlive: the TSO sine-test periods and the paper's Table 1."""
+"""Constants shared across fcrlive: the TSO sine-test periods, the paper's Table 1, the 95 % quantile."""
 
 from __future__ import annotations
 
@@ -18,3 +18,6 @@ PAPER_PERIODS_S: tuple[float, ...] = (300.0, 150.0, 100.0, 80.0, 70.0, 60.0, 50.
 
 PAPER_EXCITATION_STD_PU = 0.1 / (50.0 * 3.0)
 """The paper's white-noise excitation r[n]: standard deviation 0.1/(50·3) pu (Section 7.1)."""
+
+Z95 = 1.959963984540054
+"""Two-sided 95 % quantile of the standard normal distribution: every 95 % interval is value ± Z95·sd."""

@@ -30,3 +30,17 @@ class DataError(UserError):
 
 class ConfigError(UserError):
     """A configuration file or plant description that is invalid."""
+
+
+class ConfigProblems(ConfigError):
+    """Several problems with one configuration: ``str()`` is one line per problem (the CLI prefixes each
+    line with the command), so a user fixes them all in one go instead of one per run."""
+
+    def __init__(self, problems: list[ConfigError]):
+        if not problems:
+            raise ValueError("ConfigProblems needs at least one problem")
+        super().__init__(problems[0].message, where=problems[0].where)
+        self.problems = tuple(problems)
+
+    def __str__(self) -> str:
+        return "\n".join(str(p) for p in self.problems)

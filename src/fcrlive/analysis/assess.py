@@ -29,9 +29,9 @@ import numpy as np
 from fcrlive.analysis import local
 from fcrlive.analysis.experiments import ExperimentResult, SineExperiment
 from fcrlive.analysis.tso_checks import TsoVerdict, assess_tso, assess_tso_points, fme_response
-from fcrlive.constants import TSO_PERIODS_S
+from fcrlive.constants import TSO_PERIODS_S, Z95
 from fcrlive.gridsearch import uncertain_peak
-from fcrlive.ident import Z95, FreqResp, PeakGain
+from fcrlive.ident import FreqResp, PeakGain
 
 OMEGA_MIN = 1e-3
 """Lower end [rad/s] of the grid for peaks and margins (a 6000 s period)."""
@@ -52,6 +52,8 @@ def peak_band(ts_id: float, peak_min_period_s: float = PEAK_MIN_PERIOD_S) -> tup
 
 @dataclass(frozen=True)
 class Interval:
+    """A value with its 95 % interval [lo, hi]; lo and hi are NaN when the uncertainty is unknown."""
+
     value: float
     lo: float
     hi: float
@@ -256,7 +258,8 @@ def _assess_sine(result: SineExperiment, *, t_fme_s, products) -> Assessment:
         for wi, v, s in zip(w, Fv, result.F_sd)
     )
     tso = assess_tso_points(w, Fv, F_sd_values=result.F_sd, products=products)
-    droop = Interval(result.droop, result.droop, result.droop)
+    # the droop setting used to normalise F, not a measurement: its interval is unknown (NaN), not zero
+    droop = Interval(result.droop, float("nan"), float("nan"))
     return Assessment(
         "sine", 0.0, None, droop, None, None, "G_req", gp, f, tso, None, None, None, tuple(warns)
     )

@@ -1,6 +1,6 @@
 """The paper's identification experiments as pure functions (Sections 4.1-4.2, eqs. 7-8, 14-19).
 
-Every experiment takes :class:`fcrlive.tso.signals.PlantSignals` (pu on the machine base) and returns a
+Every experiment takes :class:`fcrlive.signals.PlantSignals` (pu on the machine base) and returns a
 frozen :class:`ExperimentResult`: the fitted models, a ``responses(omega)`` function giving uncertain
 frequency responses (:class:`fcrlive.ident.FreqResp`, first-order Gauss covariance) of ``G_1``, ``S``,
 ``G_p``, ``G_J`` where identifiable, validation figures and warnings.
@@ -55,15 +55,16 @@ Methods
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.signal as sps
 
+from fcrlive.analysis import controller as ctl_mod
 from fcrlive.errors import DataError
 from fcrlive.ident import FreqResp, IdData, IdentError, ResidResult, bj, oe, resid
 from fcrlive.ident.poly import PolyModel
-from fcrlive.tso.signals import PlantSignals
+from fcrlive.signals import PlantSignals
 
 DEFAULT_TS_ID = 0.5
 """Identification sample time [s] after decimation (module docstring)."""
@@ -191,6 +192,8 @@ class ControllerEstimate:
     """RMS of the least-squares residual of Δc over the RMS of Δc (identified only)."""
     alternatives: dict = field(default_factory=dict)
     """Relative residual of every structure tried (identified only)."""
+    digital: ctl_mod.DigitalController | None = None
+    """The difference equation at the controller rate (exact c/ε); None: the continuous PI below."""
 
     def G_c(self, omega: np.ndarray) -> np.ndarray:
         s = 1j * np.asarray(omega, float)
@@ -203,63 +206,34 @@ class ControllerEstimate:
 
 
 def controller_from_plant(plant) -> ControllerEstimate:
+    """The plant description's controller, with its exact digital difference equation
+    (:func:`fcrlive.analysis.controller.from_plant`: every integral method, PID, both placements)."""
     gov = plant.unit.governor
     return ControllerEstimate(
-        gov.Kp, gov.Ti, gov.droop, gov.droop_placement, gov.droop_signal, "plant description"
+        gov.Kp, gov.Ti, gov.droop, gov.droop_placement, gov.droop_signal, "plant description",
+        digital=ctl_mod.from_plant(gov),
     )
 
 
 def identify_controller(signals: PlantSignals) -> ControllerEstimate:
-    """Kp, Ti and ρ from logged ε, c and a by least squares on the controller's difference equation.
+    """The controller's difference equation from logged ε, c and a
+    (:func:`fcrlive.analysis.controller.identify`: structure by BIC, validated by its residual, which is
+    exact only at the controller rate).
 
-    With x the droop signal, one sample of the PI gives Δc[n] = c[n+1] − c[n] =
-    Kp Δe[n] + Ts Ki (e[n] − ρ x[n]) (− Kp ρ Δx[n] for the classic placement), Ki = Kp/Ti. All four
-    structures (integral/classic × gate/demand) are fitted with a constant; the smallest residual wins.
-    At a logging rate below the controller rate the relation is approximate (forward Euler per log
-    sample) and the residual says how well it holds. Raises DataError without c (and a for "gate").
+    Kp, Ti and the droop reported are those of the PI the identified c/ε resembles at low frequency (the
+    droop: the static a/ε or c/ε); Z_cu uses the identified difference equation itself. Raises
+    :class:`fcrlive.analysis.controller.ControllerFitError` (a DataError) when the equation does not fit,
+    e.g. on a log slower than the controller, and DataError without c.
     """
     if signals.c is None:
         raise DataError("ContOutSig is needed to identify the controller")
-    best = None
-    alts: dict[str, float] = {}
-    Ts = signals.Ts
-    for a, b in [max(signals.segments, key=lambda s: s[1] - s[0])]:
-        e = np.asarray(signals.epsilon[a:b], float)
-        c = np.asarray(signals.c[a:b], float)
-        dc = np.diff(c)
-        de = np.diff(e)
-        cands = [("gate", signals.a)] if signals.a is not None else [("demand", signals.c)]
-        for sig_name, x in cands:
-            x = np.asarray(x[a:b], float)
-            dx = np.diff(x)
-            for placement in ("integral", "classic"):
-                for rule in ("euler", "trapezoid"):
-                    # Δc = Kp Δe + k1 e − k2 x (− Kp ρ Δx) + const, k1 = Ts Ki, k2 = Ts Ki ρ;
-                    # "trapezoid" takes the mean of both ends (a log rate below the controller rate)
-                    ee = e[:-1] if rule == "euler" else 0.5 * (e[:-1] + e[1:])
-                    xx = x[:-1] if rule == "euler" else 0.5 * (x[:-1] + x[1:])
-                    cols = [de, ee, -xx, np.ones_like(de)]
-                    if placement == "classic":
-                        cols.append(-dx)
-                    X = np.column_stack(cols)
-                    th, *_ = np.linalg.lstsq(X, dc, rcond=None)
-                    res = dc - X @ th
-                    rel = float(np.sqrt(np.mean(res**2)) / max(np.sqrt(np.mean(dc**2)), 1e-300))
-                    kp, k1, k2 = th[0], th[1], th[2]
-                    key = f"{placement}/{sig_name}/{rule}"
-                    if not (kp > 1e-6 and k1 > 0 and k2 > 0):
-                        alts[key] = float("inf")
-                        continue
-                    alts[key] = rel
-                    if best is None or rel < best[0] - 1e-6:
-                        best = (rel, kp, kp * Ts / k1, k2 / k1, placement, sig_name)
-    if best is None:
-        raise DataError(
-            "could not identify a PI controller with droop from ContOutSig/GuideVane "
-            "(no structure gave positive Kp, Ki and droop)"
-        )
-    rel, kp, ti, rho, placement, sig_name = best
-    return ControllerEstimate(float(kp), float(ti), float(rho), placement, sig_name, "identified", rel, alts)
+    a, b = max(signals.segments, key=lambda s: s[1] - s[0])
+    gate = None if signals.a is None else np.asarray(signals.a[a:b], float)
+    ic = ctl_mod.identify(np.asarray(signals.epsilon[a:b], float), np.asarray(signals.c[a:b], float), gate,
+                          float(signals.Ts), where=", ".join(signals.sources) or None)
+    g = ic.governor
+    return ControllerEstimate(g.Kp, g.Ti, g.droop, g.droop_placement, g.droop_signal, "identified",
+                              ic.rel_residual, ic.alternatives, digital=ic.digital)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -291,6 +265,11 @@ class ExperimentResult:
         return float(np.pi / self.Ts)
 
 
+RESID_PRACTICAL = 0.2
+"""Smallest residual auto-/cross-correlation coefficient that a failed residual test must reach to be
+warned about (:func:`_validate`)."""
+
+
 def _validate(models: dict[str, tuple[PolyModel, IdData]]) -> tuple[dict[str, ResidResult], list[str]]:
     val, warns = {}, []
     for key, (m, d) in models.items():
@@ -299,11 +278,26 @@ def _validate(models: dict[str, tuple[PolyModel, IdData]]) -> tuple[dict[str, Re
         except (IdentError, ValueError, np.linalg.LinAlgError):
             continue
         val[key] = r
-        if not r.passed:
+        # An output-error model (no noise model) does not claim white residuals: its residual is the
+        # output noise coloured by the causal anti-aliasing filter and the decimation, and its covariance is
+        # the sandwich for that reason. The whiteness test failed on every OE fit of good data (p = 0 on a
+        # 30-min excited log of the right structure) and taught users to ignore the warning; what an OE fit
+        # must satisfy is independence of its residuals from the inputs, tested with their colour.
+        # With thousands of samples of nearly noise-free signals (a ← c) a structural mismatch far too small
+        # to matter is still "significant": a test fails only when it is significant AND the correlation
+        # is of practical size (RESID_PRACTICAL; good fits of the right structure: 0.05-0.09).
+        has_noise_model = m.nc > 0 or m.nd > 0
+        M = (len(r.xlags) - 1) // 2
+        white_ok = r.white or not has_noise_model or float(np.max(np.abs(r.autocorr[1:]))) < RESID_PRACTICAL
+        ind_ok = [
+            ok or float(np.max(np.abs(r.xcorr[i, M + (m.nk[i] if i < m.nu else 0):]))) < RESID_PRACTICAL
+            for i, ok in enumerate(r.independent)
+        ]
+        if not (white_ok and all(ind_ok)):
             what = []
-            if not r.white:
+            if not white_ok:
                 what.append(f"residuals not white (p = {r.whiteness_p:.2g})")
-            for name, ok, p in zip(d.input_names, r.independent, r.independence_p):
+            for name, ok, p in zip(d.input_names, ind_ok, r.independence_p):
                 if not ok:
                     what.append(f"residuals correlated with {name} (p = {p:.2g})")
             warns.append(f"residual test of the {key} model failed: " + "; ".join(what))
@@ -324,26 +318,71 @@ def _fit(kind: str, fn, *args, **kw) -> PolyModel:
         raise DataError(f"identification of the {kind} model failed: {exc}") from None
 
 
+def _physical(m: PolyModel) -> bool:
+    """The swing path G_J = 1/(2Hs + Kd) is a low-pass: its discrete pole is real and in (0, 1). (G_jp's
+    second pole may sit on the negative axis: it models the hold and was right there on good fits.)"""
+    return bool(len(m.f[1]) == 2 and 0.0 < -m.f[1][1] < 1.0)
+
+
+def _ls_init(d: IdData, fs: Sequence[np.ndarray], nb: Sequence[int], nk: Sequence[int]) -> PolyModel:
+    """An OE start with the given denominators and the numerators by least squares (linear in B)."""
+    rows, ys = [], []
+    for y, u in d.segments():
+        cols = []
+        for i, (f, b, k) in enumerate(zip(fs, nb, nk)):
+            xf = sps.lfilter([1.0], f, u[:, i])
+            for j in range(b):
+                lag = k + j
+                cols.append(np.concatenate((np.zeros(lag), xf[:len(xf) - lag])))
+        X = np.column_stack(cols)
+        skip = 20
+        rows.append(X[skip:])
+        ys.append(y[skip:] - np.mean(y[skip:]))
+    th = np.linalg.lstsq(np.vstack(rows), np.concatenate(ys), rcond=None)[0]
+    bs, i0 = [], 0
+    for b, k in zip(nb, nk):
+        bs.append(np.concatenate((np.zeros(k), th[i0:i0 + b])))
+        i0 += b
+    return PolyModel(a=np.ones(1), b=tuple(bs), c=np.ones(1), d=np.ones(1),
+                     f=tuple(np.asarray(f) for f in fs), nk=tuple(nk), Ts=d.Ts, noise_variance=np.nan,
+                     covariance=None, input_names=d.input_names,
+                     output_name=d.output_name)
+
+
+PHYSICAL_STARTS = ((100.0, 2.0), (30.0, 2.0), (300.0, 2.0), (100.0, 0.5), (100.0, 8.0))
+"""(τ_swing, τ_turbine) [s] of the physical restarts of the loop model (:func:`_loop_output_error`)."""
+
+
 def _loop_output_error(
     prep: Prepared, x: str, nb: Sequence[int], nf: Sequence[int]
 ) -> tuple[PolyModel, IdData]:
     d = prep.iddata("y", (x, "u"))
     m = _fit(f"y ← ({x}, u)", oe, d, list(nb), list(nf), [1, 0], **FIT)
-    if nf[1] == 1 and m.f[1][1] >= 0.0:
-        # the swing path G_J = 1/(2Hs + Kd) is a low-pass: its discrete pole is real and POSITIVE. A pole
-        # on the negative axis (an oscillation at the Nyquist rate) fits residual fast content and was a
-        # wrong minimum with a slightly lower loss on some records: restart from a physical pole
-        b = (m.b[0], m.b[1])
-        f = (m.f[0], np.array([1.0, -np.exp(-prep.Ts / 100.0)]))
-        init = PolyModel(a=np.ones(1), b=b, c=np.ones(1), d=np.ones(1), f=f, nk=m.nk, Ts=d.Ts,
-                         noise_variance=np.nan, covariance=None, input_names=d.input_names,
-                         output_name=d.output_name)
-        try:
-            m2 = oe(d, list(nb), list(nf), [1, 0], init=init, multistart=False, **FIT)
-        except (IdentError, ValueError, np.linalg.LinAlgError):
-            m2 = None
-        if m2 is not None and m2.f[1][1] < 0.0:
-            m = m2
+    if nf[1] == 1 and not _physical(m):
+        # Both paths are low-passes: the swing pole of G_J = 1/(2Hs + Kd) is real and POSITIVE, G_jp's poles
+        # are those of the turbine and the swing. A fit with a pole on the negative axis (an oscillation at
+        # the Nyquist rate) fits residual fast content and was a wrong minimum with a slightly lower loss on
+        # some records. Restart from physical denominators (numerators by least squares) and keep the
+        # physical end point of lowest loss; ties (N log V ratio < 0.01) go to the earlier start, so which
+        # one wins does not depend on rounding. Measured on a 6-min Monte Carlo record: the old single
+        # restart from the unphysical fit's G_jp ended at G_1(0) 0.022 or 0.080 by BLAS kernel.
+        best = None
+        starts = [(m.f[0], np.array([1.0, -np.exp(-prep.Ts / 100.0)]))]
+        for tau_u, tau_t in PHYSICAL_STARTS:
+            pu, pt = np.exp(-prep.Ts / tau_u), np.exp(-prep.Ts / tau_t)
+            starts.append((np.array([1.0, -(pu + pt), pu * pt]), np.array([1.0, -pu])))
+        for fs in starts:
+            try:
+                init = _ls_init(d, fs, nb, (1, 0))
+                m2 = oe(d, list(nb), list(nf), [1, 0], init=init, multistart=False, **FIT)
+            except (IdentError, ValueError, np.linalg.LinAlgError):
+                continue
+            if not _physical(m2):
+                continue
+            if best is None or d.N * np.log(best.report.loss / m2.report.loss) > 1e-2:
+                best = m2
+        if best is not None:
+            m = best
     return m, d
 
 
@@ -372,13 +411,8 @@ def zcu(
             f"Kp = {controller.Kp:.4g}, Ti = {controller.Ti:.4g} s, droop = {controller.droop:.4g} "
             f"(relative residual {controller.rel_residual:.2g})"
         )
-    ctl_warn = []
-    if controller.source == "identified" and controller.rel_residual > 0.05:
-        ctl_warn.append(
-            f"controller identification residual {controller.rel_residual:.2g}: the difference equation does "
-            "not hold at this log rate (below the controller rate?); Kp, Ti, droop and G_p may be biased: "
-            "give the plant description (--plant)"
-        )
+    # an identified controller is validated by identify_controller (it raises when its equation does not fit)
+    ctl_warn: list[str] = []
     m_cu, d_cu = _loop_output_error(prep, "c", orders[0], orders[1])
     d_ca = prep.iddata("a", ("c",))
     m_ca = _fit("a ← c", oe, d_ca, 2, 1, 0, **FIT)
@@ -389,10 +423,13 @@ def zcu(
         G_jp = m_cu.freqresp(w, "c")
         G_J = -m_cu.freqresp(w, "u") * prep.u_delay(w)
         G_s = m_ca.freqresp(w, 0)
-        x = G_s if ctl.signal == "gate" else 1.0
-        # c/ε = G_c/(1 + ρ K_ρ G_x), the integrator of G_c and K_ρ cancelling
-        L_d = ctl.droop * FreqResp.known(w, ctl.K_rho(w)) * x
-        C = FreqResp.known(w, ctl.G_c(w)) / (1.0 + L_d)
+        if ctl.digital is not None:
+            C = ctl.digital.C(w, G_s)
+        else:
+            x = G_s if ctl.signal == "gate" else 1.0
+            # c/ε = G_c/(1 + ρ K_ρ G_x), the integrator of G_c and K_ρ cancelling
+            L_d = ctl.droop * FreqResp.known(w, ctl.K_rho(w)) * x
+            C = FreqResp.known(w, ctl.G_c(w)) / (1.0 + L_d)
         G_p = G_jp * C / G_J
         S = 1.0 / (1.0 + G_p * G_J)
         return {"G_1": G_J * S, "S": S, "G_p": G_p, "G_J": G_J, "G_jp": G_jp, "G_s": G_s}
@@ -411,6 +448,157 @@ def zcu(
         val,
         tuple(warns),
         tuple(notes),
+    )
+
+
+SWING_ORDERS = ((3, 3),)
+"""Output-error (nb, nf) candidates of G_jp = y/c in :func:`zcu_swing`, smallest BIC wins. G_jp is servo ×
+turbine × swing: three poles. (2, 2) as a second candidate won on some records of the Kd = 0 units with
+0.1 % meter noise and put max|S| 27 % low with a ±0.4 % interval; a first-order high-pass on w, c and a
+(0.02 rad/s) did not help either."""
+
+
+def swing_removed(signals: PlantSignals, H: float, kd: float) -> np.ndarray:
+    """w = y + G_J u per gap-free segment, G_J = 1/(2Hs + Kd) by the bilinear transform at the log rate
+    (u linear between samples; at 10-100 Hz exact to < 1e-4 below 1.5 rad/s). Other samples: y."""
+    y = np.asarray(signals.y, float)
+    w = y.copy()
+    num, den = sps.bilinear([1.0], [2.0 * H, kd], fs=1.0 / float(signals.Ts))
+    for a, b in signals.segments:
+        u = np.asarray(signals.u[a:b], float)
+        w[a:b] = y[a:b] + sps.lfilter(num, den, u - u.mean())
+    return w
+
+
+SWING_MODEL_ERROR = 0.02
+"""Relative sd of the model error of G_jp in :func:`zcu_swing` at high frequency (:func:`model_error`)."""
+SWING_MODEL_ERROR_DC = 0.05
+"""h₀ of :func:`model_error`: the model error's share at ω = 0."""
+SWING_MODEL_ERROR_OMEGA = 0.05
+"""ω [rad/s] at which that model error reaches half its size; it vanishes at ω = 0."""
+
+
+def model_error(omega: np.ndarray) -> FreqResp:
+    """1 + δ(ω), δ = h(ω)(a + jb), a, b ~ N(0, σ²), h = h₀ + ω/(ω + ω₀): the structural error of G_jp that
+    the fit's covariance does not see (decimation of a closed loop, see :func:`zcu_swing`), as one more
+    uncertain source. Sized on the zoo's 30-min excited logs at the controller rate (ideal and 0.1 %
+    meter noise, PI plants): max|S| and max|G_1| errors 0.1-4 % where the sandwich intervals were ±1-4 %
+    and covered 33-67 % of the runs. Small at ω = 0 (h₀ σ = 0.1 %): the droop's errors were 0.001-0.02
+    percentage points, its intervals covering 83 %."""
+    w = np.atleast_1d(np.asarray(omega, float))
+    h = SWING_MODEL_ERROR_DC + w / (w + SWING_MODEL_ERROR_OMEGA)
+    jac = np.column_stack((h, 1j * h)).astype(complex)
+    cov = np.eye(2) * SWING_MODEL_ERROR**2
+    return FreqResp(w, np.ones_like(w, dtype=complex), jac, (("zcu_swing model error", cov),))
+
+
+SWING_STARTS_S = ((0.2, 0.5), (0.2, 1.0), (0.2, 2.0), (0.5, 1.0), (0.1, 0.3))
+"""(servo, turbine) time constants [s] of the physical starts of :func:`_swing_search`."""
+
+
+def _swing_search(d: IdData, nb: int, nf: int, Ts: float, H: float, kd: float) -> PolyModel | None:
+    """OE w ← c from physical starts: the swing pole from the data sheet (e^{−Ts Kd/2H}), servo and turbine
+    poles from :data:`SWING_STARTS_S`, numerators by least squares; the lowest-loss end point wins, ties
+    (N log of the loss ratio < 0.01) to the earlier start. The default multistart (high-order ARX and
+    Steiglitz-McBride starts) ended at different points by BLAS kernel on the same log (max|S| 1.230 vs
+    1.253): its searches did not converge in the flat valley around the slow swing pole."""
+    p_j = min(float(np.exp(-Ts * kd / (2.0 * H))), 1.0 - 1e-4)  # strictly stable (Kd = 0: an integrator)
+    best = None
+    for t_s, t_t in SWING_STARTS_S:
+        poles = [p_j, float(np.exp(-Ts / t_s)), float(np.exp(-Ts / t_t))][:nf]
+        f = np.poly(poles).real
+        try:
+            init = _ls_init(d, [f], [nb], [1])
+            m = oe(d, nb, nf, 1, init=init, multistart=False, **FIT)
+        except (IdentError, ValueError, np.linalg.LinAlgError):
+            continue
+        if best is None or d.N * np.log(best.report.loss / m.report.loss) > 1e-2:
+            best = m
+    return best
+
+
+def zcu_swing(
+    signals: PlantSignals,
+    *,
+    H: float,
+    kd: float,
+    controller: ControllerEstimate | None = None,
+    ts_id: float = DEFAULT_TS_ID,
+    orders: Sequence[tuple[int, int]] = SWING_ORDERS,
+) -> ExperimentResult:
+    """Z_cu with the data sheet's swing equation: G_J = 1/(2Hs + Kd) known, so only G_jp = y/c is fitted.
+
+    y = G_jp c − G_J u + v, hence w = y + G_J u = G_jp c + v: an output-error fit w ← c (nk = 1), orders
+    by BIC (:data:`SWING_ORDERS`). Known limit: the causal anti-aliasing filter spreads each process-noise
+    sample over several decimated samples, which the controller has already reacted to, so the decimated
+    noise is correlated with past c. Where c reacts strongly to the noise (a PID's derivative) that biases
+    G_jp: max|S| +13 % on the zoo's classic PID on an ideal log (a Box-Jenkins noise model took it to
+    +4..7 % but landed in wrong basins elsewhere: droop −2 pp, max|G_1| −52 % on a unit with Kd = 0, at 2-10×
+    the time). u enters only through the known low-pass G_J, so the power meter's noise
+    on u becomes output noise of w instead of input noise of a fitted u path: the errors-in-variables bias
+    that put Z_cu's G_J 68-74 % off at 0.1 % meter noise (and its peaks with it) is gone, and a unit
+    without damping (Kd = 0, G_J an integrator) no longer needs a fitted pole on the unit circle.
+    S = 1/(1 + G_jp C), G_1 = G_J S, G_p = G_jp C / G_J (eqs. 7-8, 19) with c/ε = C from the controller
+    (:mod:`fcrlive.analysis.controller`). An error δ in H adds (G_J,sheet − G_J) u to w, a bias of the order
+    of δ in G_jp where |G_J u| is comparable to |y| (reported in the notes, not in the intervals).
+    Second known limit: the meter noise n reaches w as G_J n, for Kd = 0 a random walk; on the zoo's two
+    Kd = 0 units at 0.1 % meter noise max|S| came out −34 … +15 % over three seeds, some with intervals
+    that missed.
+    """
+    if signals.c is None or signals.a is None:
+        raise DataError("zcu needs ContOutSig and GuideVane (controller output and gate position)")
+    sig_w = replace(signals, y=swing_removed(signals, H, kd))
+    prep = prepare(sig_w, ts_id=ts_id, names=("y", "c", "a"))
+    _check_length(prep, "zcu")
+    notes = [f"G_J = 1/(2Hs + Kd) from the data sheet (H = {H:g} s, Kd = {kd:g}); G_jp = y/c fitted on "
+             "y + G_J u"]
+    if controller is None:
+        controller = identify_controller(signals)
+        notes.append(
+            f"controller identified ({controller.digital.structure if controller.digital else ''}): "
+            f"Kp = {controller.Kp:.4g}, Ti = {controller.Ti:.4g} s, droop = {controller.droop:.4g} "
+            f"(relative residual {controller.rel_residual:.2g})"
+        )
+    d = prep.iddata("y", ("c",))
+    fits = []
+    for o in orders:
+        nb, nf = o
+        m = _swing_search(d, nb, nf, prep.Ts, H, kd)
+        if m is None:
+            continue
+        p = 0 if m.covariance is None else m.covariance.shape[0]
+        fits.append((d.N * np.log(m.report.loss) + p * np.log(d.N), o, m))
+    if not fits:
+        raise DataError("identification of the w ← c model failed")
+    # smallest BIC; a later candidate must win by more than 1 (ties to the simpler: no rounding coin toss)
+    best = fits[0]
+    for f in fits[1:]:
+        if f[0] < best[0] - 1.0:
+            best = f
+    _, o_best, m_cu = best
+    notes.append(f"G_jp output-error orders (nb, nf) = {o_best} by BIC")
+    d_ca = prep.iddata("a", ("c",))
+    m_ca = _fit("a ← c", oe, d_ca, 2, 1, 0, **FIT)
+    ctl = controller
+
+    def responses(omega) -> dict[str, FreqResp]:
+        w = np.atleast_1d(np.asarray(omega, float))
+        G_jp = m_cu.freqresp(w, 0) * model_error(w)
+        G_J = FreqResp.known(w, 1.0 / (2.0 * H * 1j * w + kd))
+        G_s = m_ca.freqresp(w, 0)
+        if ctl.digital is not None:
+            C = ctl.digital.C(w, G_s)
+        else:
+            x = G_s if ctl.signal == "gate" else 1.0
+            C = FreqResp.known(w, ctl.G_c(w)) / (1.0 + ctl.droop * FreqResp.known(w, ctl.K_rho(w)) * x)
+        L = G_jp * C
+        S = 1.0 / (1.0 + L)
+        return {"G_1": G_J * S, "S": S, "G_p": L / G_J, "G_J": G_J, "G_jp": G_jp, "G_s": G_s}
+
+    val, warns = _validate({"y + G_J u ← c": (m_cu, d), "a ← c": (m_ca, d_ca)})
+    return ExperimentResult(
+        "zcu", prep.Ts, d.N, prep.duration_s, {"y+G_J u<-c": m_cu, "a<-c": m_ca}, responses,
+        ("G_1", "S", "G_p"), ctl, val, tuple(warns), tuple(notes),
     )
 
 

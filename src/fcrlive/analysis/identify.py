@@ -4,10 +4,20 @@
 :func:`identify_files` reads TSO CSV logs and calls it. Method choice (``method="auto"``):
 
 - every file is a sine-test log (period in the headers) → ``sine``;
-- an excitation was applied (ApplFreqSig differs from GridFreq) → ``zcu`` when ContOutSig and GuideVane
-  are logged, else ``zur``;
-- no excitation → ``zu`` whatever else is logged: without r the inputs of Z_cu and Z_ur are not
-  excited independently (paper Sections 6.1-6.3).
+- an excitation was applied (r = (GridFreq − ApplFreqSig)/f0 clearly above the columns' resolution,
+  :func:`excitation_detected`) and the log is at the controller rate → ``zcu`` when ContOutSig and
+  GuideVane are logged, else ``zur``. Without a plant description the controller rate is unknown: Z_cu's
+  controller fit (:mod:`fcrlive.analysis.controller`) is exact only at it and says so; with H known, a
+  controller that does not fit sends the log to ``lowband`` instead. With H known Z_cu takes G_J from
+  the data sheet (:func:`fcrlive.analysis.experiments.zcu_swing`);
+- otherwise, with H known (plant description or ``h``) → ``lowband`` (:mod:`fcrlive.analysis.lowband`:
+  G_p from u − (2Hs + Kd) y on ε, robust to power-meter noise and to logs slower than the controller);
+- otherwise ``zu``: without r the inputs of Z_cu and Z_ur are not excited independently (paper
+  Sections 6.1-6.3).
+
+With ``lowband`` the peaks max|G_1| and max|S| and the G_p/TSO points are reported only where the u-ε
+coherence at their frequency is at least :data:`fcrlive.analysis.lowband.PEAK_MIN_COHERENCE`; otherwise
+they are null with the reason (``IdentifyReport.not_identifiable``).
 """
 
 from __future__ import annotations
@@ -19,13 +29,46 @@ from pathlib import Path
 import numpy as np
 
 from fcrlive.analysis import experiments as ex
-from fcrlive.analysis.assess import PEAK_MIN_PERIOD_S, Assessment, assess
+from fcrlive.analysis import lowband as lb
+from fcrlive.analysis.assess import PEAK_MIN_PERIOD_S, Assessment, assess, peak_band
+from fcrlive.analysis.controller import ControllerFitError
 from fcrlive.analysis.report import IdentifyReport, build_report
 from fcrlive.constants import F0_HZ
 from fcrlive.errors import DataError, UserError
-from fcrlive.tso.signals import PlantSignals
+from fcrlive.signals import PlantSignals
 
-METHODS = ("auto", "zu", "zur", "zcu", "sine")
+METHODS = ("auto", "zu", "zur", "zcu", "sine", "lowband")
+
+EXCITATION_RESOLUTION_FACTOR = 4.0
+"""r counts as an excitation when its rms exceeds this many times the rms of the columns' rounding
+(:func:`excitation_detected`)."""
+
+
+def _resolution(x: np.ndarray) -> float:
+    """The quantum of a logged column [its unit]: smallest step between its distinct values (0 when it
+    looks continuous, i.e. more distinct values than a quantised column of its range would have)."""
+    v = np.unique(np.round(np.asarray(x, float), 9))
+    if v.size < 2:
+        return 0.0
+    q = float(np.min(np.diff(v)))
+    return q if q > 1e-8 else 0.0
+
+
+def excitation_detected(s: PlantSignals) -> bool:
+    """Whether r = (GridFreq − ApplFreqSig)/f0 is an excitation and not rounding.
+
+    GridFreq written with 3 decimals and ApplFreqSig with 6 differ by up to 0.5 mHz everywhere: their
+    peak-to-peak difference alone (the old test, 1 mHz) took that for an excitation and ran Z_cu on a
+    normal-operation log (1.5 pp off). r must exceed the rounding of both columns clearly: rms(r) above
+    EXCITATION_RESOLUTION_FACTOR × (q_f + q_a)/√12 (q the columns' quanta) and above 0.1 mHz.
+    """
+    if not s.has_excitation:
+        return False
+    f = s.f0 * (1.0 + np.asarray(s.y, float))
+    fa = f - s.f0 * np.asarray(s.r, float)
+    q = _resolution(f) + _resolution(fa)
+    rms = float(np.std(np.asarray(s.r, float)) * s.f0)
+    return rms > max(EXCITATION_RESOLUTION_FACTOR * q / np.sqrt(12.0), 1e-4)
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,18 +80,38 @@ class Identification:
     experiment: object
 
 
-def choose_method(signals: Sequence[PlantSignals]) -> tuple[str, str]:
-    """(method, reason) for ``method="auto"`` (module docstring)."""
+def choose_method(
+    signals: Sequence[PlantSignals], *, h_known: bool = False, controller_ts: float | None = None
+) -> tuple[str, str]:
+    """(method, reason) for ``method="auto"`` (module docstring). ``h_known``: H is known (plant
+    description or ``h``); ``controller_ts``: the governor's sample time [s] when known."""
     if all(s.period_s is not None for s in signals):
         return "sine", "sine-test logs (period in the headers): industry sine-test evaluation"
     if any(s.period_s is not None for s in signals):
         raise UserError("mix of sine-test and operation logs: identify them separately")
-    if all(s.has_excitation for s in signals):
+    excited = all(excitation_detected(s) for s in signals)
+    ts = max(float(s.Ts) for s in signals)
+    governor_cols = all(s.c is not None and s.a is not None for s in signals)
+    # Without the controller's rate, an excited log with the governor's columns goes to Z_cu: its controller
+    # fit is exact only at the controller rate and says so (analysis.controller); identify_full falls back
+    # to lowband when it does not fit. Only a known controller rate marks a log slow beforehand.
+    slow = ts > 1.5 * controller_ts if controller_ts else (ts > SLOW_LOG_S and not governor_cols)
+    if h_known and (not excited or slow):
+        why = "no excitation" if not excited else (
+            f"log at {1.0 / ts:.3g} Hz, slower than the controller"
+            + (f" ({1.0 / controller_ts:.3g} Hz)" if controller_ts else "")
+        )
+        return "lowband", (
+            f"{why}, H known: G_p from the swing equation (lowband; robust to power-meter noise and to "
+            "logs slower than the controller)"
+        )
+    if excited:
         if all(s.c is not None and s.a is not None for s in signals):
             return "zcu", "excitation applied and ContOutSig/GuideVane logged: Z_cu with Z_ca (paper 4.2.2)"
         return "zur", "excitation applied, no ContOutSig/GuideVane: Z_ur (paper 4.2.1)"
     return "zu", (
-        "no excitation (ApplFreqSig absent or equal to GridFreq): Z_u, G_1 only (paper 4.2.1 eq. 16, 6.3)"
+        "no excitation (ApplFreqSig absent or equal to GridFreq within the columns' resolution): Z_u, G_1 "
+        "only (paper 4.2.1 eq. 16, 6.3); give H (--h or --plant) for G_p and the droop from lowband"
     )
 
 
@@ -95,11 +158,12 @@ def identify_signals(
     ts_id: float = ex.DEFAULT_TS_ID,
     t_fme_s: float | None = None,
     peak_min_period_s: float = PEAK_MIN_PERIOD_S,
+    h: float | None = None,
 ) -> IdentifyReport:
     """Identify and assess; returns the report (see :func:`identify_full` for the objects behind it)."""
     return identify_full(
         signals, rated_mw=rated_mw, f0=f0, kd=kd, plant=plant, method=method, ts_id=ts_id, t_fme_s=t_fme_s,
-        peak_min_period_s=peak_min_period_s,
+        peak_min_period_s=peak_min_period_s, h=h,
     ).report
 
 
@@ -118,6 +182,7 @@ def identify_full(
     ts_id: float = ex.DEFAULT_TS_ID,
     t_fme_s: float | None = None,
     peak_min_period_s: float = PEAK_MIN_PERIOD_S,
+    h: float | None = None,
 ) -> Identification:
     """The pipeline (module docstring). ``plant``: an fcrlive Plant; its controller is used for Z_cu and
     its droop for the sine-test normalisation. ``peak_min_period_s``: shortest period of the band in which
@@ -129,7 +194,9 @@ def identify_full(
     if method not in METHODS:
         raise UserError(f"unknown method {method!r}; use one of {', '.join(METHODS)}")
     rated = float(rated_mw if rated_mw is not None else sigs[0].rated_mw)
-    auto_method, auto_reason = choose_method(sigs)
+    H = h if h is not None else (plant.unit.swing.H if plant is not None else None)
+    tc = plant.unit.governor.Tc if plant is not None else None
+    auto_method, auto_reason = choose_method(sigs, h_known=H is not None, controller_ts=tc)
     if method == "auto":
         method, reason = auto_method, auto_reason
     else:
@@ -156,6 +223,9 @@ def identify_full(
         )
         return Identification(rep, a, exp)
     sig = merge_signals(sigs)
+    if method == "lowband":
+        return _identify_lowband(sig, H=H, kd=kd, rated=rated, f0=f0, reason=reason, t_fme_s=t_fme_s,
+                                 peak_min_period_s=peak_min_period_s)
     if method in ("zur", "zcu") and not sig.has_excitation:
         raise DataError(
             f"--method {method} needs an excitation (ApplFreqSig differing from GridFreq); "
@@ -164,7 +234,22 @@ def identify_full(
     if method == "zcu":
         if plant is not None:
             controller = ex.controller_from_plant(plant)
-        exp = ex.zcu(sig, controller=controller, ts_id=ts_id)
+        try:
+            # With H (and Kd) from the data sheet G_J is known and only G_jp is fitted (ex.zcu_swing): the
+            # fitted swing path of plain Z_cu was 35-100 % off on half the zoo and 68-74 % off at 0.1 %
+            # meter noise, and its peaks with it, with intervals that excluded the truth.
+            if H is not None:
+                exp = ex.zcu_swing(sig, H=float(H), kd=kd, controller=controller, ts_id=ts_id)
+            else:
+                exp = ex.zcu(sig, controller=controller, ts_id=ts_id)
+        except ControllerFitError as exc:
+            # Every quantity of Z_cu hangs on c/ε: with a controller that does not fit, none is identifiable
+            # by Z_cu. With H known, auto answers from the low band instead (it needs no controller).
+            if reason.startswith("requested") or H is None:
+                raise
+            why = f"Z_cu not possible: {exc.message}"
+            return _identify_lowband(sig, H=H, kd=kd, rated=rated, f0=f0, reason=f"{why}; lowband instead",
+                                     t_fme_s=t_fme_s, peak_min_period_s=peak_min_period_s)
         controller = exp.controller
     elif method == "zur":
         exp = ex.zur(sig, ts_id=ts_id)
@@ -198,9 +283,80 @@ def identify_full(
         f0=f0,
         sources=list(sig.sources),
         ts_id=exp.Ts,
+        sample_interval_s=sig.Ts,
+        segments=len(sig.segments),
         controller=controller,
         extra_warnings=extra,
         notes=list(exp.notes),
+    )
+    return Identification(rep, a, exp)
+
+
+PEAK_EDGE_FRACTION = 0.9
+"""A lowband maximum at or above this fraction of the peak band's upper end counts as the band's edge."""
+
+
+def _identify_lowband(sig: PlantSignals, *, H, kd, rated, f0, reason, t_fme_s, peak_min_period_s
+                      ) -> Identification:
+    """The lowband experiment, assessed, with the peaks and G_p points gated by the coherence."""
+    if H is None:
+        raise UserError("--method lowband needs the inertia constant H (--h or --plant)")
+    exp = lb.lowband(sig, H=float(H), kd=kd)
+    a = assess(exp, kd=kd, t_fme_s=t_fme_s, peak_min_period_s=peak_min_period_s)
+    diag = lb.diagnostics(sig)
+    ni: dict[str, str] = {}
+    thr = lb.PEAK_MIN_COHERENCE
+    band_lo, band_hi = peak_band(exp.Ts, peak_min_period_s)
+    for key, pk in (("max_abs_g1", a.max_g1), ("max_abs_s", a.max_s)):
+        if pk is None:
+            continue
+        if pk.omega <= band_lo / PEAK_EDGE_FRACTION:
+            # G_1 and S of a governed unit rise from ω = 0 to a resonance; a maximum at the band's low end
+            # is a fit without one (zoo: max|G_1| 93 % low, the static gain, with a narrow interval)
+            ni[key] = (
+                f"not identifiable from this log: the low-band fit has no resonance (its maximum is at the "
+                f"low end of the band, ω = {pk.omega:.3g} rad/s)"
+            )
+            continue
+        if pk.omega >= PEAK_EDGE_FRACTION * band_hi:
+            # The fit at 5 s reaches ω ≤ band_hi only; a maximum at that edge is the edge, not a peak (on the
+            # zoo: true peaks at 0.28-0.6 rad/s came out 17-96 % low here, with intervals that missed them).
+            ni[key] = (
+                f"not identifiable from this log: the maximum lies at the upper edge of the band the lowband "
+                f"fit reaches (ω = {pk.omega:.3g} of ≤ {band_hi:.3g} rad/s); the true peak may be above it"
+            )
+            continue
+        coh, snr = diag.at(pk.omega)
+        if not coh >= thr:
+            ni[key] = (
+                f"not identifiable from this log: u-ε coherence {coh:.2f} at ω = {pk.omega:.3g} rad/s "
+                f"(needs ≥ {thr:g}; u's SNR over its noise floor {snr:.0f} dB)"
+            )
+    # G_p and the TSO checks need the band of 10-300 s periods; the fit at 5 s reaches 0.5 rad/s only
+    w_lo, w_hi = 2 * np.pi / 300.0, 2 * np.pi / 10.0
+    bad = [w for w in np.geomspace(w_lo, min(w_hi, 0.8 * np.pi / exp.Ts), 12) if not diag.at(w)[0] >= thr]
+    if bad or w_hi > 0.8 * np.pi / exp.Ts:
+        why = (
+            f"not identifiable from this log: u-ε coherence {diag.at(bad[0])[0]:.2f} at ω = {bad[0]:.3g} "
+            f"rad/s (needs ≥ {thr:g})" if bad else
+            f"the lowband fit at Ts = {exp.Ts:g} s does not reach the 10 s period of the TSO band"
+        )
+        ni["gp"] = why
+        ni["tso"] = why
+    dq = {
+        "u_noise_floor_pct_rated": float(diag.u_noise_pct_rated),
+        "bands": [
+            {"omega_lo": b.lo, "omega_hi": b.hi, "snr_u_db": b.snr_u_db, "coherence": b.coherence}
+            for b in diag.bands
+        ],
+    }
+    bands = ", ".join(f"{b.lo:g}-{b.hi:g}: {b.snr_u_db:.0f} dB, {b.coherence:.2f}" for b in diag.bands)
+    notes = [*exp.notes, f"u noise floor ≈ {diag.u_noise_pct_rated:.3g} % of rated; per band (rad/s: "
+             f"SNR_u dB, coherence): {bands}"]
+    rep = build_report(
+        a, method_reason=reason, samples=exp.n_samples, duration_s=exp.duration_s, rated_mw=rated, f0=f0,
+        sources=list(sig.sources), ts_id=exp.Ts, sample_interval_s=sig.Ts, segments=len(sig.segments),
+        notes=notes, not_identifiable=ni, data_quality=dq,
     )
     return Identification(rep, a, exp)
 

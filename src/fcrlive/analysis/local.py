@@ -25,8 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from fcrlive.analysis.tso_checks import Z95, as_response, evaluate
-from fcrlive.constants import PAPER_EXCITATION_STD_PU
+from fcrlive.analysis.tso_checks import as_response, evaluate
+from fcrlive.constants import PAPER_EXCITATION_STD_PU, Z95
 from fcrlive.errors import ConfigError
 from fcrlive.gridsearch import log_grid, refined_min
 from fcrlive.gridsearch import peak as grid_peak
@@ -285,7 +285,7 @@ class DroopEstimate:
     value: float
     lower: float
     upper: float
-    """CI ends: the monotone map of the CI ends of G_1(0) (inf when 1/G_1 − K_d ≤ 0)."""
+    """CI ends: the monotone map of the CI ends of G_1(0) (inf when 1/G_1 − K_d ≤ 0; NaN when unknown)."""
     sd: float | None
     """Delta-method standard deviation, when an sd of G_1(0) was given."""
     g1_static: float
@@ -298,9 +298,11 @@ class DroopEstimate:
 
 
 def effective_droop_from_g1(g1_static: float, kd: float) -> float:
-    """ρ_eff = 1/(1/G_1(0) − K_d) = G_1(0)/(1 − K_d G_1(0)) [pu]; inf if K_d G_1(0) ≥ 1."""
+    """ρ_eff = 1/(1/G_1(0) − K_d) = G_1(0)/(1 − K_d G_1(0)) [pu]; inf if K_d G_1(0) ≥ 1, NaN for NaN."""
     g = float(g1_static)
     d = 1.0 - kd * g
+    if np.isnan(d):
+        return float("nan")
     return g / d if d > 0 else float("inf")
 
 
@@ -312,7 +314,8 @@ def effective_droop(
     ci: tuple[float, float] | None = None,
     z: float = Z95,
 ) -> DroopEstimate:
-    """ρ_eff with an interval from (G_1(0), sd) (CI g ± z·sd) or an explicit CI of G_1(0).
+    """ρ_eff with an interval from (G_1(0), sd) (CI g ± z·sd) or an explicit CI of G_1(0); with neither
+    (or a NaN sd) the interval is NaN: unknown, not the zero-width interval of an exact value.
 
     The map g ↦ g/(1 − K_d g) is increasing for g < 1/K_d, so the CI ends map to CI ends exactly;
     the sd is the delta method, dρ/dg = 1/(1 − K_d g)². Example (paper plant 1): G_1(0) = 0.0794,
@@ -326,8 +329,8 @@ def effective_droop(
     elif sd is not None:
         lo, hi = g1_static - z * sd, g1_static + z * sd
     else:
-        lo = hi = g1_static
-    lo_r = effective_droop_from_g1(lo, kd) if lo > 0 else 0.0
+        lo = hi = float("nan")
+    lo_r = effective_droop_from_g1(lo, kd) if not lo <= 0 else 0.0
     hi_r = effective_droop_from_g1(hi, kd)
     dsd = None
     if sd is not None:

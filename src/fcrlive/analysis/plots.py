@@ -1,7 +1,9 @@
 """PNG plots of the FCR checks (matplotlib, Agg backend): Bode with a 95 % band, Nyquist of F·G, Req. 9.
 
-Every function takes frequency responses as callables ``fr(omega [rad/s])`` or sampled points, writes one
-PNG file and returns its path. The TSO band of periods (10-300 s) is shaded.
+Every function takes identified responses (:class:`fcrlive.ident.FreqResp`: values and their
+uncertainty on its own ω grid), response functions (:data:`~fcrlive.analysis.tso_checks.ResponseFunction`,
+``fr(omega [rad/s])``, evaluated on the plot's grid) or sampled points, writes one PNG file and returns
+its path. The TSO band of periods (10-300 s) is shaded.
 """
 
 from __future__ import annotations
@@ -22,13 +24,15 @@ from fcrlive.analysis.tso_checks import (
     STABILITY_RADIUS,
     STABILITY_TOLERANCE,
     TSO_BAND_PERIODS_S,
-    Z95,
     PowerSystemModel,
+    ResponseFunction,
     as_response,
     band_omega,
     disturbance_profile,
     evaluate,
 )
+from fcrlive.constants import Z95
+from fcrlive.ident import FreqResp
 
 __all__ = ["plot_bode", "plot_nyquist", "plot_performance"]
 
@@ -41,6 +45,21 @@ def _save(fig, path) -> Path:
     return p
 
 
+DEFAULT_OMEGA = np.logspace(-3, 1, 800)
+"""Where a Bode plot evaluates a response function when no ω is given [rad/s]."""
+
+
+def _on_grid(fr, w: np.ndarray | None) -> tuple[FreqResp | None, np.ndarray, np.ndarray]:
+    """(the FreqResp or None, ω, values): a FreqResp on its own grid (within ``w``'s range when given), a
+    response function on ``w`` (default :data:`DEFAULT_OMEGA`)."""
+    if isinstance(fr, FreqResp):
+        if w is not None:
+            fr = fr[(fr.omega >= w.min()) & (fr.omega <= w.max())]
+        return fr, fr.omega, fr.value
+    w = DEFAULT_OMEGA if w is None else w
+    return None, w, evaluate(as_response(fr), w)
+
+
 def _shade_band(ax, x_axis: str, band_s: tuple[float, float]) -> None:
     if x_axis == "period":
         lo, hi = sorted(band_s)
@@ -51,7 +70,7 @@ def _shade_band(ax, x_axis: str, band_s: tuple[float, float]) -> None:
 
 def plot_bode(
     path,
-    responses: Sequence[tuple[str, object]],
+    responses: Sequence[tuple[str, FreqResp | ResponseFunction]],
     *,
     omega=None,
     sd: dict[str, object] | None = None,
@@ -63,29 +82,29 @@ def plot_bode(
 ) -> Path:
     """Bode plot (magnitude, phase in degrees) of labelled responses, with 95 % bands.
 
-    responses: (label, callable) pairs. sd: label → callable of the circular sd of that response; the
-    band is |X| ± z·sd and arg X ± z·sd/|X| (first-order). points: (label, ω, values, sd or None)
-    e.g. sine tests, drawn as markers with error bars. x_axis: "omega" [rad/s] or "period" [s].
+    responses: (label, response) pairs. A FreqResp is drawn on its own ω grid (within ``omega``'s range
+    when given) with its own 95 % bands of |G| and arg G. A response function is evaluated on ``omega``
+    (default 1e-3-10 rad/s); sd: label → function of the circular sd of that response, the band is
+    |X| ± z·sd and arg X ± z·sd/|X| (first-order). points: (label, ω, values, sd or None) e.g. sine
+    tests, drawn as markers with error bars. x_axis: "omega" [rad/s] or "period" [s].
     """
     if x_axis not in ("omega", "period"):
         raise ValueError("x_axis must be 'omega' or 'period'")
-    w = np.logspace(-3, 1, 800) if omega is None else np.asarray(omega, float)
-    x = w if x_axis == "omega" else 2 * np.pi / w
     fig, (am, ap) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
     for ax in (am, ap):
         _shade_band(ax, x_axis, band_s)
+    grid = None if omega is None else np.asarray(omega, float)
     for label, fr in responses:
-        v = evaluate(as_response(fr), w)
+        resp, w, v = _on_grid(fr, grid)
+        x = w if x_axis == "omega" else 2 * np.pi / w
         mag, ph = np.abs(v), np.degrees(np.unwrap(np.angle(v)))
         (line,) = am.loglog(x, mag, label=label)
         ap.semilogx(x, ph, color=line.get_color())
-        if sd and label in sd:
-            s = np.abs(evaluate(as_response(sd[label]), w))
-            am.fill_between(
-                x, np.maximum(mag - z * s, mag * 1e-3), mag + z * s, color=line.get_color(), alpha=0.2
-            )
-            dph = np.degrees(np.minimum(z * s / np.maximum(mag, 1e-300), np.pi))
-            ap.fill_between(x, ph - dph, ph + dph, color=line.get_color(), alpha=0.2)
+        band = _bands(resp, w, mag, ph, (sd or {}).get(label), z)
+        if band is not None:
+            (m_lo, m_hi), (p_lo, p_hi) = band
+            am.fill_between(x, np.maximum(m_lo, mag * 1e-3), m_hi, color=line.get_color(), alpha=0.2)
+            ap.fill_between(x, p_lo, p_hi, color=line.get_color(), alpha=0.2)
     for label, pw, pv, psd in points:
         pw, pv = np.asarray(pw, float), np.asarray(pv, complex)
         px = pw if x_axis == "omega" else 2 * np.pi / pw
@@ -105,6 +124,20 @@ def plot_bode(
     return _save(fig, path)
 
 
+def _bands(resp: FreqResp | None, w, mag, ph_deg, sd_fun, z):
+    """((|X| lo, hi), (arg X lo, hi) [deg]): the 95 % bands of a FreqResp from its own sd of |G| and
+    arg G, of a response function from ``sd_fun`` (circular sd); None without an uncertainty."""
+    if resp is not None:
+        s_abs, s_ph = resp.sd_abs, resp.sd_phase
+    elif sd_fun is not None:
+        s_abs = np.abs(evaluate(as_response(sd_fun), w))
+        s_ph = s_abs / np.maximum(mag, 1e-300)
+    else:
+        return None
+    dph = np.degrees(np.minimum(z * s_ph, np.pi))
+    return (mag - z * s_abs, mag + z * s_abs), (ph_deg - dph, ph_deg + dph)
+
+
 def plot_nyquist(
     path,
     F,
@@ -118,10 +151,11 @@ def plot_nyquist(
 ) -> Path:
     """Nyquist plot of F·G (ω > 0 solid, ω < 0 mirrored dotted) with −1, the 0.43 and 0.4085 circles.
 
-    The part inside the tested band is drawn thicker; ``points`` (ω, F) adds e.g. sine-test values.
+    ``F``: a FreqResp (drawn on its grid within ``omega_range``) or a response function. The part inside
+    the tested band is drawn thicker; ``points`` (ω, F) adds e.g. sine-test values.
     """
-    w = np.logspace(np.log10(omega_range[0]), np.log10(omega_range[1]), 3000)
-    L = evaluate(as_response(F), w) * G(w)
+    _, w, Fv = _on_grid(F, np.logspace(np.log10(omega_range[0]), np.log10(omega_range[1]), 3000))
+    L = Fv * G(w)
     lo, hi = band_omega(band_s)
     inb = (w >= lo) & (w <= hi)
     fig, ax = plt.subplots(figsize=(6.5, 6))
@@ -170,9 +204,10 @@ def plot_performance(
     margin: float = PERFORMANCE_MARGIN,
     title: str = "",
 ) -> Path:
-    """Req. 9: K_margin·|G/(1 + F G)| against |1/D(jω)| vs ω; with F/K_red,dyn if given."""
-    w = np.logspace(np.log10(omega_range[0]), np.log10(omega_range[1]), 2000)
-    Fv, Gv = evaluate(as_response(F), w), G(w)
+    """Req. 9: K_margin·|G/(1 + F G)| against |1/D(jω)| vs ω; with F/K_red,dyn if given. ``F``: a FreqResp
+    (on its grid within ``omega_range``) or a response function."""
+    _, w, Fv = _on_grid(F, np.logspace(np.log10(omega_range[0]), np.log10(omega_range[1]), 2000))
+    Gv = G(w)
     fig, ax = plt.subplots(figsize=(7, 4.5))
     _shade_band(ax, "omega", band_s)
     ax.loglog(w, margin * np.abs(Gv / (1 + Fv * Gv)), label=f"{margin:g}·|G/(1+FG)|")

@@ -1,5 +1,6 @@
-"""The identification report: a pydantic model (the JSON of ``fcrlive identify --json`` and the payload
-the daemon publishes) and a readable text summary. Schema documented in docs/identify.md.
+"""The identification report: a pydantic model (the JSON of ``fcrlive identify --json``, and the typed
+result that the daemon's worker returns, stores and publishes) and a readable text summary. Schema
+documented in docs/identify.md.
 
 Units: droop and G_1 as fractions/pu (0.04 for 4 %), ω in rad/s, periods in s, transfer functions in pu on
 the machine base with positive static gains (G_p from the control error to power).
@@ -8,11 +9,13 @@ the machine base with positive static gains (G_p from the control error to power
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
-from fcrlive.analysis.assess import Assessment, PeriodPoint
+if TYPE_CHECKING:  # the model alone stays light: the daemon's publisher imports it, not the numerics
+    from fcrlive.analysis.assess import Assessment, PeriodPoint
 
 SCHEMA_VERSION = 1
 
@@ -24,9 +27,14 @@ def _f(x) -> float | None:
     return x if math.isfinite(x) else None
 
 
+Bounds = tuple[float | None, float | None]
+"""A 95 % interval [lower, upper]; an end is None (JSON null) where it is unknown."""
+
+
 class ValueCI(BaseModel):
     value: float | None
-    ci95: list[float | None] = Field(description="[lo, hi], 95 % interval")
+    ci95: Bounds = Field(description="[lower, upper], 95 % interval (null where unknown)")
+    reason: str | None = Field(default=None, description="why value is null (not identifiable from this log)")
 
 
 class PeakCI(ValueCI):
@@ -39,7 +47,7 @@ class PeriodValue(BaseModel):
     im: float
     abs: float
     phase_deg: float
-    abs_ci95: list[float | None]
+    abs_ci95: Bounds
 
 
 class TsoProduct(BaseModel):
@@ -54,12 +62,25 @@ class TsoProduct(BaseModel):
     k_red_dyn: float | None
     k_red_dyn_lower: float | None = None
     k_red_dyn_min: float | None
-    passed: bool = Field(alias="pass")
+    passed: bool = Field(alias="pass", description="the point verdict (the point estimate of F)")
     passed_at_bound: bool | None = None
     reasons: list[str] = []
     notes: list[str] = []
+    # the verdict with its uncertainty (tso_checks.decide; docs/tso-checks.md) and the optimistic bounds
+    decision: Literal["pass", "fail", "undecided"] | None = Field(
+        default=None, description="pass/fail only when the 95 % interval is clear of the limit")
+    stability_margin_band_upper: float | None = None
+    stability_margin_wide_upper: float | None = None
+    performance_ratio_lower: float | None = None
+    k_red_dyn_upper: float | None = None
 
-    model_config = {"populate_by_name": True}
+    @property
+    def verdict(self) -> str:
+        """The decision; reports stored before it existed: the point verdict."""
+        return self.decision or ("pass" if self.passed else "fail")
+
+    # one spelling on the wire, "pass", in every dump; Python code says .passed
+    model_config = ConfigDict(validate_by_name=True, validate_by_alias=True, serialize_by_alias=True)
 
 
 class LocalChecks(BaseModel):
@@ -95,6 +116,9 @@ class IdentifyReport(BaseModel):
     samples: int
     duration_s: float
     identification_ts_s: float | None = None
+    sample_interval_s: float | None = Field(
+        default=None, description="sample interval of the data before decimation [s] (null: sine)")
+    segments: int | None = Field(default=None, description="gap-free segments of that data (null: sine)")
     rated_mw: float
     f0_hz: float
     kd: float
@@ -112,11 +136,18 @@ class IdentifyReport(BaseModel):
     tso: dict[str, TsoProduct] | None
     local: LocalChecks | None
     controller: ControllerOut | None = None
+    not_identifiable: dict[str, str] = Field(
+        default={}, description="quantity -> why it is null (e.g. coherence at its frequency, log rate)"
+    )
+    data_quality: dict | None = Field(
+        default=None, description="measured from the log: u's meter-noise floor, SNR and coherence per band"
+    )
     warnings: list[str] = []
     notes: list[str] = []
 
     def to_json_dict(self) -> dict:
-        return self.model_dump(mode="json", by_alias=True)
+        """The JSON form as a dict (what ``identify --json`` prints and the daemon stores)."""
+        return self.model_dump(mode="json")
 
 
 def _period_values(pts: tuple[PeriodPoint, ...] | None) -> list[PeriodValue] | None:
@@ -129,7 +160,7 @@ def _period_values(pts: tuple[PeriodPoint, ...] | None) -> list[PeriodValue] | N
             im=p.value.imag,
             abs=abs(p.value),
             phase_deg=float(np.degrees(np.angle(p.value))),
-            abs_ci95=[_f(p.abs_lo), _f(p.abs_hi)],
+            abs_ci95=(_f(p.abs_lo), _f(p.abs_hi)),
         )
         for p in sorted(pts, key=lambda p: p.period_s)
     ]
@@ -145,21 +176,27 @@ def build_report(
     f0: float,
     sources=(),
     ts_id: float | None = None,
+    sample_interval_s: float | None = None,
+    segments: int | None = None,
     controller=None,
     extra_warnings=(),
     notes=(),
+    not_identifiable: dict[str, str] | None = None,
+    data_quality: dict | None = None,
 ) -> IdentifyReport:
+    """The report of an assessment; ``not_identifiable`` (quantity -> reason) nulls those quantities."""
+    ni = dict(not_identifiable or {})
     droop = g1s = mg1 = ms = None
     if a.droop is not None:
-        droop = ValueCI(value=_f(a.droop.value), ci95=[_f(a.droop.lo), _f(a.droop.hi)])
+        droop = ValueCI(value=_f(a.droop.value), ci95=(_f(a.droop.lo), _f(a.droop.hi)))
     if a.g1_static is not None:
-        g1s = ValueCI(value=_f(a.g1_static.value), ci95=[_f(a.g1_static.lo), _f(a.g1_static.hi)])
+        g1s = ValueCI(value=_f(a.g1_static.value), ci95=(_f(a.g1_static.lo), _f(a.g1_static.hi)))
     if a.max_g1 is not None:
         lo, hi = a.max_g1.ci95
-        mg1 = PeakCI(value=_f(a.max_g1.value), omega=_f(a.max_g1.omega), ci95=[_f(lo), _f(hi)])
+        mg1 = PeakCI(value=_f(a.max_g1.value), omega=_f(a.max_g1.omega), ci95=(_f(lo), _f(hi)))
     if a.max_s is not None:
         lo, hi = a.max_s.ci95
-        ms = PeakCI(value=_f(a.max_s.value), omega=_f(a.max_s.omega), ci95=[_f(lo), _f(hi)])
+        ms = PeakCI(value=_f(a.max_s.value), omega=_f(a.max_s.omega), ci95=(_f(lo), _f(hi)))
     tso = None
     if a.tso is not None:
         tso = {
@@ -177,6 +214,11 @@ def build_report(
                 k_red_dyn_min=_f(v.k_red_dyn_min),
                 passed=v.passed,
                 passed_at_bound=v.passed_at_bound,
+                decision=v.decision,
+                stability_margin_band_upper=_f(v.stability_margin_band_upper),
+                stability_margin_wide_upper=_f(v.stability_margin_wide_upper),
+                performance_ratio_lower=_f(v.performance_ratio_lower),
+                k_red_dyn_upper=_f(v.k_red_dyn_upper),
                 reasons=list(v.reasons),
                 notes=list(v.notes),
             )
@@ -210,13 +252,15 @@ def build_report(
             source=controller.source,
             rel_residual=_f(controller.rel_residual) if controller.source == "identified" else None,
         )
-    return IdentifyReport(
+    rep = IdentifyReport(
         method=a.method,
         method_reason=method_reason,
         sources=list(sources),
         samples=int(samples),
         duration_s=float(duration_s),
         identification_ts_s=ts_id,
+        sample_interval_s=sample_interval_s,
+        segments=segments,
         rated_mw=float(rated_mw),
         f0_hz=float(f0),
         kd=float(a.kd),
@@ -231,9 +275,23 @@ def build_report(
         tso=tso,
         local=loc,
         controller=ctl,
+        not_identifiable=ni,
+        data_quality=data_quality,
         warnings=[*a.warnings, *extra_warnings],
         notes=list(notes),
     )
+    if "droop" in ni:
+        rep.droop = ValueCI(value=None, ci95=(None, None), reason=ni["droop"])
+        rep.g1_static = None
+    if "max_abs_g1" in ni:
+        rep.max_abs_g1 = PeakCI(value=None, ci95=(None, None), omega=None, reason=ni["max_abs_g1"])
+    if "max_abs_s" in ni:
+        rep.max_abs_s = PeakCI(value=None, ci95=(None, None), omega=None, reason=ni["max_abs_s"])
+    if "gp" in ni:
+        rep.gp = rep.f = None
+    if "tso" in ni:
+        rep.tso = None
+    return rep
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -242,12 +300,21 @@ def build_report(
 
 def _ci(v: ValueCI | None, fmt: str = "{:.4f}", scale: float = 1.0, unit: str = "") -> str:
     if v is None or v.value is None:
-        return "not identifiable"
+        return "not identifiable" + (f": {v.reason}" if v is not None and v.reason else "")
     lo, hi = v.ci95
     s = fmt.format(v.value * scale)
     if lo is not None and hi is not None:
         s += f"  [{fmt.format(lo * scale)}, {fmt.format(hi * scale)}]"
+    else:
+        s += "  [interval unknown]"
     return s + (f" {unit}" if unit else "")
+
+
+def _iv(lo: float | None, hi: float | None) -> str:
+    """" [lo, hi]" of a verdict's 95 % bounds ("?" where unknown); "" for an exact F (no bounds)."""
+    if lo is None and hi is None:
+        return ""
+    return " [" + ", ".join("?" if x is None else f"{x:.3f}" for x in (lo, hi)) + "]"
 
 
 def _num(x, fmt: str) -> str:
@@ -305,30 +372,38 @@ def text_summary(r: IdentifyReport) -> str:
         for p in r.gp:
             fp = fmap.get(p.period_s)
             lo, hi = p.abs_ci95
+            band = "unknown" if lo is None or hi is None else f"[{lo:.3f}, {hi:.3f}]"
             lines.append(
                 f"{p.period_s:7.0f} {p.abs:10.3f} {p.phase_deg:10.1f} "
-                f"{(fp.abs if fp else float('nan')):8.3f} {f'[{lo:.3f}, {hi:.3f}]':>22}"
+                f"{(fp.abs if fp else float('nan')):8.3f} {band:>22}"
             )
     if r.tso:
         lines += ["", "TSO requirements (Req. 8 stability, Req. 9 performance):"]
         for k, v in r.tso.items():
             if v.stability_margin_band is None or v.performance_ratio is None:
-                lines.append(f"  {k.upper():<5} {'PASS' if v.passed else 'FAIL'}")
+                lines.append(f"  {k.upper():<5} {v.verdict.upper()}")
                 continue
             wide = "n/a" if v.stability_margin_wide is None else f"{v.stability_margin_wide:.3f}"
             stab = (
                 "n/a" if v.closed_loop_stable is None else ("stable" if v.closed_loop_stable else "UNSTABLE")
             )
             lines.append(
-                f"  {k.upper():<5} {'PASS' if v.passed else 'FAIL'}: "
+                f"  {k.upper():<5} {v.verdict.upper()}: "
                 f"min|1+FG| band {v.stability_margin_band:.3f}"
+                f"{_iv(v.stability_margin_band_lower, v.stability_margin_band_upper)}"
                 f" (≥ {v.stability_threshold:.4f}), wide {wide}, closed loop {stab}; Req. 9 ratio "
-                f"{v.performance_ratio:.3f}, K_red,dyn {v.k_red_dyn:.3f} (≥ {v.k_red_dyn_min:g})"
+                f"{v.performance_ratio:.3f}, K_red,dyn {v.k_red_dyn:.3f}"
+                f"{_iv(v.k_red_dyn_lower, v.k_red_dyn_upper)} (≥ {v.k_red_dyn_min:g})"
             )
+            if v.verdict == "undecided":
+                lines.append("        undecided: a margin's 95 % interval reaches over its limit or is "
+                             "unknown" + ("" if v.passed else " (the point estimate fails)"))
             for reason in v.reasons:
                 lines.append(f"        {reason}")
     elif r.gp is None:
-        lines += ["", "TSO requirements: not checked (G_p not identifiable from this data)"]
+        why = r.not_identifiable.get("tso") or r.not_identifiable.get("gp")
+        lines += ["", "TSO requirements: not checked (G_p not identifiable from this data"
+                  + (f": {why})" if why else ")")]
     if r.warnings:
         lines += ["", "warnings:"] + [f"  - {w}" for w in r.warnings]
     if r.notes:

@@ -3,10 +3,12 @@
 Everything here works on frequency responses, so an analytic model, an identified model and the
 points of a sine test are checked the same way.
 
-A *frequency response* is a callable ``fr(omega) -> complex ndarray`` with ``omega`` in rad/s (a
-continuous-time model evaluated at jω, or a discrete-time model evaluated at e^{jωTs} by the caller;
-python-control ``TransferFunction`` objects are accepted and converted by :func:`as_response`).
-Sampled points (omega, values) become a callable with :func:`interpolate_points`.
+The responses here are :data:`ResponseFunction` s: callables ``fr(omega) -> complex ndarray`` with
+``omega`` in rad/s (a continuous-time model evaluated at jω, or a discrete-time model evaluated at
+e^{jωTs} by the caller; python-control ``TransferFunction`` objects are accepted and converted by
+:func:`as_response`), which can be evaluated anywhere a search needs them. They are not the identified
+:class:`fcrlive.ident.FreqResp` (values with their uncertainty on a fixed grid of ω). Sampled points
+(omega, values) become a callable with :func:`interpolate_points`.
 
 Conventions (docs/tso-checks.md):
 - ``F`` is the unit's normalised response from frequency CONTROL ERROR (f_ref − f) to power, with unit
@@ -27,12 +29,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fcrlive.constants import F0_HZ
+from fcrlive.constants import F0_HZ, Z95
 from fcrlive.errors import ConfigError
 from fcrlive.gridsearch import log_grid, refined_min
 
-FrequencyResponse = Callable[[np.ndarray], np.ndarray]
-"""``fr(omega [rad/s]) -> complex ndarray`` of the same shape."""
+ResponseFunction = Callable[[np.ndarray], np.ndarray]
+"""A response as a function: ``fr(omega [rad/s]) -> complex ndarray`` of the same shape (module docstring)."""
 
 KF_PU_PER_HZ = 0.01
 """Load frequency dependence K_f of the TR power-system model [pu/Hz] (Table 7)."""
@@ -53,8 +55,6 @@ TSO_BAND_PERIODS_S: tuple[float, float] = (10.0, 300.0)
 """The tested band of sine periods [s] (TR Table 6)."""
 FREQUENCY_BAND_HZ: dict[str, float] = {"fcrn": 0.1, "fcrd": 0.4}
 """One-sided frequency band Δf_FCR-X [Hz] per product."""
-Z95 = 1.959963984540054
-"""Two-sided 95 % normal quantile."""
 
 
 # --------------------------------------------------------------------------------------------------
@@ -62,8 +62,8 @@ Z95 = 1.959963984540054
 # --------------------------------------------------------------------------------------------------
 
 
-def as_response(sys) -> FrequencyResponse:
-    """A frequency response callable from a python-control LTI system or a callable.
+def as_response(sys) -> ResponseFunction:
+    """A :data:`ResponseFunction` from a python-control LTI system or a callable.
 
     Continuous systems are evaluated at jω, discrete ones at e^{jω dt}. Callables pass unchanged.
     Duck-typed so that importing this module does not import python-control.
@@ -87,7 +87,7 @@ def evaluate(fr, omega) -> np.ndarray:
     return v
 
 
-def rational(num: Sequence[float], den: Sequence[float], dt: float | None = None) -> FrequencyResponse:
+def rational(num: Sequence[float], den: Sequence[float], dt: float | None = None) -> ResponseFunction:
     """Frequency response of a rational transfer function (coefficients highest power first).
 
     Continuous (``dt=None``): num(jω)/den(jω). Discrete (``dt`` in s): num(z)/den(z) at z = e^{jω dt},
@@ -104,12 +104,12 @@ def rational(num: Sequence[float], den: Sequence[float], dt: float | None = None
     return fr
 
 
-def delay(tau_s: float) -> FrequencyResponse:
+def delay(tau_s: float) -> ResponseFunction:
     """Pure time delay e^{−jωτ} (τ in s)."""
     return lambda w: np.exp(-1j * np.asarray(w, float) * tau_s)
 
 
-def fme_response(t_fme_s: float = 1.0) -> FrequencyResponse:
+def fme_response(t_fme_s: float = 1.0) -> ResponseFunction:
     """F_FME(s) = 1/(T_FME s + 1): frequency measurement equipment, default T_FME = 1 s (TR Section 4.4).
 
     Multiply F by it when the test signal is generated inside the controller and so bypasses the
@@ -124,7 +124,7 @@ def normalise_gp(
     droop: float | None = None,
     static_gain: float | None = None,
     t_fme_s: float | None = None,
-) -> FrequencyResponse:
+) -> ResponseFunction:
     """F from G_p: ``F = droop·G_p`` or ``F = G_p/static_gain`` (exactly one), times F_FME if ``t_fme_s``.
 
     ``gp``: response from control error ε [pu of f0] to mechanical (or electrical) power [pu machine
@@ -146,7 +146,7 @@ def normalise_gp(
     return F
 
 
-def interpolate_points(omega, values) -> FrequencyResponse:
+def interpolate_points(omega, values) -> ResponseFunction:
     """A callable through sampled points (e.g. sine tests): linear in the complex plane vs log ω.
 
     The TR constructs the Nyquist curve between measured points by interpolation; this does the same.
@@ -344,6 +344,8 @@ class StabilityMargin:
     """ω of the minimum [rad/s]."""
     margin_lower: float | None = None
     """The margin at the lower 95 % bound of F (see assess_tso), or None."""
+    margin_upper: float | None = None
+    """The margin at the optimistic 95 % bound (F moved by z·sd away from −1/G), or None."""
 
     @property
     def period_s(self) -> float:
@@ -356,7 +358,8 @@ def stability_margin(
     """min over ω ∈ omega_range [rad/s] of |1 + F G| (Req. 8), refined around the grid minimum.
 
     ``F_sd``: optional callable of the (complex, circular) standard deviation of F; the lower bound
-    moves F by z·sd towards −1/G, the worst direction: |1 + F G| − z·sd·|G|.
+    moves F by z·sd towards −1/G, the worst direction: |1 + F G| − z·sd·|G|; the upper bound away from
+    it: min of |1 + F G| + z·sd·|G|.
     """
     Ff, Gf = as_response(F), as_response(G)
     w = log_grid(*omega_range, n)
@@ -365,15 +368,16 @@ def stability_margin(
         return np.abs(1.0 + evaluate(Ff, x) * evaluate(Gf, x))
 
     m, wm = refined_min(dist, w, dist(w))
-    lower = None
+    lower = upper = None
     if F_sd is not None:
         sdf = as_response(F_sd)
 
-        def dist_lo(x):
-            return dist(x) - z * np.abs(evaluate(sdf, x)) * np.abs(evaluate(Gf, x))
+        def dist_lo(x, sign=-1.0):
+            return dist(x) + sign * z * np.abs(evaluate(sdf, x)) * np.abs(evaluate(Gf, x))
 
         lower, _ = refined_min(dist_lo, w, dist_lo(w))
-    return StabilityMargin(m, wm, lower)
+        upper, _ = refined_min(lambda x: dist_lo(x, 1.0), w, dist_lo(w, 1.0))
+    return StabilityMargin(m, wm, lower, upper)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -395,6 +399,10 @@ class Performance:
     """The ratio at the upper 95 % bound of F's uncertainty, or None."""
     k_red_dyn_lower: float | None = None
     """K_red,dyn at the 95 % bound, or None."""
+    ratio_lower: float | None = None
+    """The ratio at the optimistic 95 % bound (F moved by z·sd away from −1/G), or None."""
+    k_red_dyn_upper: float | None = None
+    """K_red,dyn at the optimistic 95 % bound, or None."""
 
     @property
     def period_s(self) -> float:
@@ -445,16 +453,17 @@ def performance(
 
     The worst ratio is refined around the grid maximum; K_red,dyn is bisected on the dense grid (a
     narrow resonance between grid points could be missed: the grid has ``n`` log-spaced points).
-    ``F_sd``: as in stability_margin, the upper bound uses |1 + F G/K| − z·sd·|G|/K.
+    ``F_sd``: as in stability_margin, the upper bound uses |1 + F G/K| − z·sd·|G|/K, the lower (optimistic)
+    one |1 + F G/K| + z·sd·|G|/K; K_red,dyn's bounds follow from each.
     """
     Ff, Gf = as_response(F), as_response(G)
     w = log_grid(*omega_range, n)
     Fv, Gv, Dv = evaluate(Ff, w), evaluate(Gf, w), disturbance_profile(w)
     sdv = np.abs(evaluate(as_response(F_sd), w)) if F_sd is not None else None
 
-    def neg_ratio(x, sd=None):
+    def neg_ratio(x, sd=None, zz=z):
         sdx = np.abs(evaluate(as_response(F_sd), x)) if sd is not None else None
-        r = _ratio_fun(evaluate(Ff, x), evaluate(Gf, x), disturbance_profile(x), sdx, 1.0, margin, z)
+        r = _ratio_fun(evaluate(Ff, x), evaluate(Gf, x), disturbance_profile(x), sdx, 1.0, margin, zz)
         return np.where(np.isfinite(r), -r, np.nan)
 
     r_grid = _ratio_fun(Fv, Gv, Dv, None, 1.0, margin, z)
@@ -463,20 +472,29 @@ def performance(
     if np.isnan(ratio) and np.isinf(r_grid).any():
         ratio, wm = float("inf"), float(w[np.argmax(r_grid)])
 
-    def worst(k, sd=None):
-        r = _ratio_fun(Fv, Gv, Dv, sd, k, margin, z)
+    def worst(k, sd=None, zz=z):
+        r = _ratio_fun(Fv, Gv, Dv, sd, k, margin, zz)
         return float(np.nanmax(r)) if np.isfinite(r).any() or np.isinf(r).any() else float("nan")
 
     # K_red,dyn: on the grid, but pass-through of the refined ratio for K = 1.
     k_red = 1.0 if ratio < 1.0 else _k_red(lambda k: worst(k) if k < 1.0 else max(worst(1.0), ratio))
-    ratio_up = k_lo = None
+    ratio_up = k_lo = ratio_lo = k_hi = None
     if sdv is not None:
         neg_u, _ = refined_min(
             lambda x: neg_ratio(x, sd=True), w, -_ratio_fun(Fv, Gv, Dv, sdv, 1.0, margin, z)
         )
         ratio_up = -neg_u
-        k_lo = _k_red(lambda k: worst(k, sdv) if k < 1.0 else max(worst(1.0, sdv), ratio_up))
-    return Performance(float(ratio), float(wm), float(k_red), ratio_up, k_lo)
+        # an unknown sd (NaN) leaves the bound unknown; the bisection would read it as K = 0
+        k_lo = float("nan") if np.isnan(ratio_up) else _k_red(
+            lambda k: worst(k, sdv) if k < 1.0 else max(worst(1.0, sdv), ratio_up))
+        # the optimistic side: F moved by z·sd away from −1/G (z → −z in the ratio's denominator)
+        neg_l, _ = refined_min(
+            lambda x: neg_ratio(x, sd=True, zz=-z), w, -_ratio_fun(Fv, Gv, Dv, sdv, 1.0, margin, -z)
+        )
+        ratio_lo = -neg_l
+        k_hi = float("nan") if np.isnan(ratio_lo) else _k_red(
+            lambda k: worst(k, sdv, -z) if k < 1.0 else max(worst(1.0, sdv, -z), ratio_lo))
+    return Performance(float(ratio), float(wm), float(k_red), ratio_up, k_lo, ratio_lo, k_hi)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -528,6 +546,14 @@ class TsoVerdict:
     """Fraction of F samples with a closed-loop stable Nyquist curve (samples only)."""
     passed_at_bound: bool | None = None
     """The verdict with the 95 % bounds in place of the point values."""
+    # The optimistic 95 % bounds (F moved away from −1/G; samples: the other quantile)
+    stability_margin_band_upper: float | None = None
+    stability_margin_wide_upper: float | None = None
+    performance_ratio_lower: float | None = None
+    k_red_dyn_upper: float | None = None
+    decision: str = "undecided"
+    """"pass", "fail" or "undecided": the verdict with its uncertainty (:func:`decide`); ``passed`` is
+    the point verdict."""
     extras: dict = field(default_factory=dict, compare=False, hash=False)
     """Per-sample arrays when F_samples were given: keys margin_band, margin_wide, ratio, k_red_dyn."""
 
@@ -542,6 +568,243 @@ class TsoVerdict:
     @property
     def period_performance_s(self) -> float:
         return 2 * np.pi / self.omega_performance
+
+
+@dataclass(frozen=True)
+class _ProductChecks:
+    """Req. 8 and Req. 9 of one product on the point estimate of F."""
+
+    key: str
+    threshold: float
+    k_min: float
+    band: StabilityMargin
+    wide: StabilityMargin | None
+    enc: Encirclement | None
+    perf: Performance
+    wide_at_k_red: float | None
+    """min |1 + (F/K_red,dyn) G_stab| over the wide band, when K_red,dyn < 1."""
+    stable: bool | None
+
+
+@dataclass(frozen=True)
+class _Bounds:
+    """The 95 % bounds of the margins, the ratio and K_red,dyn (None: not asked for)."""
+
+    margin_band: float | None = None
+    margin_wide: float | None = None
+    ratio: float | None = None
+    k_red_dyn: float | None = None
+    stable_fraction: float | None = None
+    extras: dict = field(default_factory=dict)
+    # the optimistic side
+    margin_band_upper: float | None = None
+    margin_wide_upper: float | None = None
+    ratio_lower: float | None = None
+    k_red_dyn_upper: float | None = None
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """What every product's checks share: F, the frequency ranges and the options of assess_tso."""
+
+    F: ResponseFunction
+    w_band: tuple[float, float]
+    omega_wide: tuple[float, float] | None
+    perf_range: tuple[float, float]
+    margin_scope: str
+    check_encirclement: bool
+    open_loop_unstable_poles: int
+    z: float
+
+
+def _check_product(su: _Setup, key: str, thr: float, F_sd) -> _ProductChecks:
+    """Req. 8 (band and wide margins, encirclements) and Req. 9 (ratio, K_red,dyn) for one product;
+    with ``F_sd`` also their bounds moved by z·sd (StabilityMargin.margin_lower, Performance.*)."""
+    g_stab, g_perf = PRODUCTS[key]
+    Ff, wide = su.F, su.omega_wide
+    mb = stability_margin(Ff, g_stab, su.w_band, F_sd=F_sd, z=su.z)
+    mw = stability_margin(Ff, g_stab, wide, F_sd=F_sd, z=su.z) if wide else None
+    enc = None
+    if wide and su.check_encirclement:
+        enc = encirclements(lambda x, g=g_stab: evaluate(Ff, x) * g(x), wide[1])
+    perf = performance(Ff, g_perf, su.perf_range, F_sd=F_sd, z=su.z)
+    m_k = None
+    if perf.k_red_dyn < 1.0 and perf.k_red_dyn > 0 and wide:
+        k = perf.k_red_dyn
+        m_k = stability_margin(lambda x, k=k: evaluate(Ff, x) / k, g_stab, wide).margin
+    stable = None if enc is None else enc.ccw == su.open_loop_unstable_poles
+    return _ProductChecks(key, thr, K_RED_DYN_MIN[key], mb, mw, enc, perf, m_k, stable)
+
+
+def _reasons_and_notes(c: _ProductChecks, su: _Setup) -> tuple[list[str], list[str]]:
+    """Why the product fails (the verdict) and what else is worth knowing (does not decide it)."""
+    thr, mb, mw, enc, perf = c.threshold, c.band, c.wide, c.enc, c.perf
+    reasons: list[str] = []
+    notes: list[str] = []
+    used = mb if su.margin_scope == "band" else mw
+    if not used.margin >= thr:
+        reasons.append(
+            f"Req. 8: min |1+FG| = {used.margin:.3f} < {thr:.4f} ({su.margin_scope}) at T = "
+            f"{2 * np.pi / used.omega:.1f} s"
+        )
+    if c.stable is False:
+        reasons.append(
+            f"Req. 8: Nyquist curve encircles −1 ({enc.ccw} ccw encirclements, "
+            f"{su.open_loop_unstable_poles} open-loop unstable poles): closed loop unstable"
+        )
+    if enc is not None and not enc.reliable:
+        notes.append(
+            f"encirclement count may be unreliable (|FG| = {enc.tail_loop_gain:.2f} at "
+            f"ω = {enc.omega_max:.3g} rad/s, winding {enc.raw:.2f})"
+        )
+    if enc is None:
+        notes.append("closed-loop stability not established (no wide-band model)")
+    if mw is not None and su.margin_scope == "band" and mw.margin < min(thr, mb.margin - 1e-9):
+        notes.append(f"outside the tested band min |1+FG| = {mw.margin:.3f} at T = {mw.period_s:.2f} s")
+    if perf.k_red_dyn < c.k_min:
+        reasons.append(
+            f"Req. 9: ratio {perf.ratio:.3f} at T = {perf.period_s:.1f} s; K_red,dyn = "
+            f"{perf.k_red_dyn:.3f} < {c.k_min}"
+        )
+    elif perf.k_red_dyn < 1.0:
+        notes.append(f"Req. 9 met with capacity reduction K_red,dyn = {perf.k_red_dyn:.3f}")
+    if c.wide_at_k_red is not None and c.wide_at_k_red < thr:
+        notes.append(f"with F/K_red,dyn the wide-band min |1+FG| is {c.wide_at_k_red:.3f} < {thr:.4f}")
+    return reasons, notes
+
+
+def _bounds_from_sd(c: _ProductChecks) -> _Bounds:
+    """The bounds the sd of F gave the checks (None where no F_sd was given)."""
+    return _Bounds(c.band.margin_lower, None if c.wide is None else c.wide.margin_lower,
+                   c.perf.ratio_upper, c.perf.k_red_dyn_lower,
+                   margin_band_upper=c.band.margin_upper,
+                   margin_wide_upper=None if c.wide is None else c.wide.margin_upper,
+                   ratio_lower=c.perf.ratio_lower, k_red_dyn_upper=c.perf.k_red_dyn_upper)
+
+
+def _bounds_from_samples(su: _Setup, key: str, F_samples: Sequence) -> _Bounds:
+    """The checks repeated on each F sample: 2.5 % quantiles of the margins and K_red,dyn, the 97.5 %
+    quantile of the ratio (and the other quantile of each as the optimistic bound), the fraction of
+    closed-loop stable samples; the per-sample arrays as extras."""
+    g_stab, g_perf = PRODUCTS[key]
+    wide = su.omega_wide
+    s_mb, s_mw, s_r, s_k, s_st = [], [], [], [], []
+    for Fi in F_samples:
+        Fi = as_response(Fi)
+        s_mb.append(stability_margin(Fi, g_stab, su.w_band, n=600).margin)
+        if wide:
+            s_mw.append(stability_margin(Fi, g_stab, wide, n=1000).margin)
+            if su.check_encirclement:
+                e = encirclements(lambda x, Fi=Fi, g=g_stab: evaluate(Fi, x) * g(x), wide[1], n=1500)
+                s_st.append(e.ccw == su.open_loop_unstable_poles)
+        p = performance(Fi, g_perf, su.perf_range, n=1000)
+        s_r.append(p.ratio)
+        s_k.append(p.k_red_dyn)
+    return _Bounds(
+        margin_band=float(np.quantile(s_mb, 0.025)),
+        margin_wide=float(np.quantile(s_mw, 0.025)) if s_mw else None,
+        ratio=float(np.quantile(s_r, 0.975)),
+        k_red_dyn=float(np.quantile(s_k, 0.025)),
+        stable_fraction=float(np.mean(s_st)) if s_st else None,
+        extras={"margin_band": np.array(s_mb), "margin_wide": np.array(s_mw), "ratio": np.array(s_r),
+                "k_red_dyn": np.array(s_k)},
+        margin_band_upper=float(np.quantile(s_mb, 0.975)),
+        margin_wide_upper=float(np.quantile(s_mw, 0.975)) if s_mw else None,
+        ratio_lower=float(np.quantile(s_r, 0.025)),
+        k_red_dyn_upper=float(np.quantile(s_k, 0.975)),
+    )
+
+
+def _passed_at_bound(c: _ProductChecks, b: _Bounds, margin_scope: str) -> bool | None:
+    """The verdict with the 95 % bounds in place of the point values; None when they are unknown."""
+    used_lo = b.margin_band if margin_scope == "band" else b.margin_wide
+    if used_lo is None or np.isnan(used_lo) or (b.k_red_dyn is not None and np.isnan(b.k_red_dyn)):
+        return None
+    return bool(
+        used_lo >= c.threshold
+        and (b.k_red_dyn is None or b.k_red_dyn >= c.k_min)
+        and c.stable is not False
+        and (b.stable_fraction is None or b.stable_fraction >= 0.975)
+    )
+
+
+def _known(x: float | None) -> bool:
+    return x is not None and not np.isnan(x)
+
+
+def decide(c: _ProductChecks, b: _Bounds, margin_scope: str, *, exact: bool) -> str:
+    """"pass", "fail" or "undecided": the verdict with its uncertainty (docs/tso-checks.md, "Decision").
+
+    - ``exact`` (an F given without F_sd or F_samples, e.g. an analytic model): the point verdict.
+    - pass: the verdict holds at the pessimistic 95 % bounds (``passed_at_bound`` True).
+    - fail: a requirement fails even at its optimistic 95 % bound: the Req. 8 margin's upper bound
+      < the threshold, or K_red,dyn's upper bound < its minimum; or the point estimate's Nyquist curve
+      encircles −1 (closed loop unstable) and that cannot change within the uncertainty: no F sample
+      is closed-loop stable, or (F_sd) the pessimistic wide-band margin is > 0 (no F within z·sd
+      reaches −1, so none changes the winding) on a reliable encirclement count.
+    - undecided: otherwise, including every case where a bound it needs is unknown (None/NaN), and
+      where the bounds (sample quantiles) disagree with the point verdict: a decision is never the
+      opposite of ``passed``.
+    """
+    point = _passed_point(c, margin_scope)
+    if exact:
+        return "pass" if point else "fail"
+    if point:
+        return "pass" if _passed_at_bound(c, b, margin_scope) else "undecided"
+    # the point fails: fail only if it also fails on the optimistic side
+    m_hi = b.margin_band_upper if margin_scope == "band" else b.margin_wide_upper
+    if _known(m_hi) and m_hi < c.threshold:
+        return "fail"
+    if _known(b.k_red_dyn_upper) and b.k_red_dyn_upper < c.k_min:
+        return "fail"
+    if c.stable is False:
+        if b.stable_fraction is not None:
+            if b.stable_fraction == 0.0:
+                return "fail"
+        elif c.enc is not None and c.enc.reliable and _known(b.margin_wide) and b.margin_wide > 0:
+            return "fail"
+    return "undecided"
+
+
+def _passed_point(c: _ProductChecks, margin_scope: str) -> bool:
+    """The point verdict (what ``TsoVerdict.passed`` says): Req. 8 margin, closed loop, Req. 9 K_red,dyn."""
+    used = c.band if margin_scope == "band" else c.wide
+    return bool(used.margin >= c.threshold and c.stable is not False and c.perf.k_red_dyn >= c.k_min)
+
+
+def _verdict(c: _ProductChecks, b: _Bounds, su: _Setup, exact: bool = False) -> TsoVerdict:
+    reasons, notes = _reasons_and_notes(c, su)
+    mw = c.wide
+    return TsoVerdict(
+        product=c.key,
+        stability_threshold=c.threshold,
+        stability_margin_band=c.band.margin,
+        omega_stability_band=c.band.omega,
+        stability_margin_wide=None if mw is None else mw.margin,
+        omega_stability_wide=None if mw is None else mw.omega,
+        closed_loop_stable=c.stable,
+        encirclements_ccw=None if c.enc is None else c.enc.ccw,
+        performance_ratio=c.perf.ratio,
+        omega_performance=c.perf.omega,
+        k_red_dyn=c.perf.k_red_dyn,
+        k_red_dyn_min=c.k_min,
+        stability_margin_wide_at_k_red=c.wide_at_k_red,
+        passed=not reasons,
+        reasons=tuple(reasons),
+        notes=tuple(notes),
+        stability_margin_band_lower=b.margin_band,
+        stability_margin_wide_lower=b.margin_wide,
+        performance_ratio_upper=b.ratio,
+        k_red_dyn_lower=b.k_red_dyn,
+        closed_loop_stable_fraction=b.stable_fraction,
+        passed_at_bound=_passed_at_bound(c, b, su.margin_scope),
+        stability_margin_band_upper=b.margin_band_upper,
+        stability_margin_wide_upper=b.margin_wide_upper,
+        performance_ratio_lower=b.ratio_lower,
+        k_red_dyn_upper=b.k_red_dyn_upper,
+        decision=decide(c, b, su.margin_scope, exact=exact),
+        extras=b.extras,
+    )
 
 
 def assess_tso(
@@ -579,131 +842,28 @@ def assess_tso(
     F_samples: F responses drawn from the estimate's distribution; the bounds are then the 2.5 %
         quantile of the margins / K_red,dyn and the 97.5 % quantile of the ratio, and
         closed_loop_stable_fraction is reported. If both are given, the samples win.
+
+    Each verdict's ``passed`` is the point verdict; ``decision`` ("pass" / "fail" / "undecided", see
+    :func:`decide`) is the one to publish: pass only when it holds at the pessimistic 95 % bounds, fail
+    only when it fails even at the optimistic ones, undecided in between or when a bound is unknown.
+    An F given without F_sd or F_samples is taken as exact: decision = the point verdict.
     """
     if margin_scope not in ("band", "wide"):
         raise ConfigError(f"margin_scope must be 'band' or 'wide', got {margin_scope!r}")
     if margin_scope == "wide" and omega_wide is None:
         raise ConfigError("margin_scope='wide' needs omega_wide")
-    Ff = as_response(F)
     w_band = band_omega(band)
-    perf_range = performance_range or omega_wide or w_band
+    su = _Setup(as_response(F), w_band, omega_wide, performance_range or omega_wide or w_band, margin_scope,
+                check_encirclement, open_loop_unstable_poles, z)
     out: dict[str, TsoVerdict] = {}
     for prod in products:
         key = product_key(prod)
         if key in out:
             continue
-        g_stab, g_perf = PRODUCTS[key]
         thr = stability_threshold(key, tolerance=tolerance, fcrn_exemption=fcrn_exemption)
-        sd = F_sd if F_samples is None else None
-        mb = stability_margin(Ff, g_stab, w_band, F_sd=sd, z=z)
-        mw = stability_margin(Ff, g_stab, omega_wide, F_sd=sd, z=z) if omega_wide else None
-        enc = None
-        if omega_wide and check_encirclement:
-            enc = encirclements(lambda x, g=g_stab: evaluate(Ff, x) * g(x), omega_wide[1])
-        perf = performance(Ff, g_perf, perf_range, F_sd=sd, z=z)
-        k_min = K_RED_DYN_MIN[key]
-        m_k = None
-        if perf.k_red_dyn < 1.0 and perf.k_red_dyn > 0 and omega_wide:
-            k = perf.k_red_dyn
-            m_k = stability_margin(lambda x, k=k: evaluate(Ff, x) / k, g_stab, omega_wide).margin
-
-        stable = None if enc is None else enc.ccw == open_loop_unstable_poles
-        reasons: list[str] = []
-        notes: list[str] = []
-        used = mb.margin if margin_scope == "band" else mw.margin
-        if not used >= thr:
-            reasons.append(
-                f"Req. 8: min |1+FG| = {used:.3f} < {thr:.4f} ({margin_scope}) at T = "
-                f"{2 * np.pi / (mb.omega if margin_scope == 'band' else mw.omega):.1f} s"
-            )
-        if stable is False:
-            reasons.append(
-                f"Req. 8: Nyquist curve encircles −1 ({enc.ccw} ccw encirclements, "
-                f"{open_loop_unstable_poles} open-loop unstable poles): closed loop unstable"
-            )
-        if enc is not None and not enc.reliable:
-            notes.append(
-                f"encirclement count may be unreliable (|FG| = {enc.tail_loop_gain:.2f} at "
-                f"ω = {enc.omega_max:.3g} rad/s, winding {enc.raw:.2f})"
-            )
-        if enc is None:
-            notes.append("closed-loop stability not established (no wide-band model)")
-        if mw is not None and margin_scope == "band" and mw.margin < min(thr, mb.margin - 1e-9):
-            notes.append(f"outside the tested band min |1+FG| = {mw.margin:.3f} at T = {mw.period_s:.2f} s")
-        if perf.k_red_dyn < k_min:
-            reasons.append(
-                f"Req. 9: ratio {perf.ratio:.3f} at T = {perf.period_s:.1f} s; K_red,dyn = "
-                f"{perf.k_red_dyn:.3f} < {k_min}"
-            )
-        elif perf.k_red_dyn < 1.0:
-            notes.append(f"Req. 9 met with capacity reduction K_red,dyn = {perf.k_red_dyn:.3f}")
-        if m_k is not None and m_k < thr:
-            notes.append(f"with F/K_red,dyn the wide-band min |1+FG| is {m_k:.3f} < {thr:.4f}")
-
-        # Uncertainty bounds
-        mb_lo, mw_lo, r_up, k_lo, frac = mb.margin_lower, (mw.margin_lower if mw else None), None, None, None
-        r_up, k_lo = perf.ratio_upper, perf.k_red_dyn_lower
-        extras: dict = {}
-        if F_samples is not None:
-            s_mb, s_mw, s_r, s_k, s_st = [], [], [], [], []
-            for Fi in F_samples:
-                Fi = as_response(Fi)
-                s_mb.append(stability_margin(Fi, g_stab, w_band, n=600).margin)
-                if omega_wide:
-                    s_mw.append(stability_margin(Fi, g_stab, omega_wide, n=1000).margin)
-                    if check_encirclement:
-                        e = encirclements(
-                            lambda x, Fi=Fi, g=g_stab: evaluate(Fi, x) * g(x), omega_wide[1], n=1500
-                        )
-                        s_st.append(e.ccw == open_loop_unstable_poles)
-                p = performance(Fi, g_perf, perf_range, n=1000)
-                s_r.append(p.ratio)
-                s_k.append(p.k_red_dyn)
-            mb_lo = float(np.quantile(s_mb, 0.025))
-            mw_lo = float(np.quantile(s_mw, 0.025)) if s_mw else None
-            r_up = float(np.quantile(s_r, 0.975))
-            k_lo = float(np.quantile(s_k, 0.025))
-            frac = float(np.mean(s_st)) if s_st else None
-            extras = {
-                "margin_band": np.array(s_mb),
-                "margin_wide": np.array(s_mw),
-                "ratio": np.array(s_r),
-                "k_red_dyn": np.array(s_k),
-            }
-        passed_bound = None
-        if mb_lo is not None:
-            used_lo = mb_lo if margin_scope == "band" else mw_lo
-            passed_bound = bool(
-                used_lo >= thr
-                and (k_lo is None or k_lo >= k_min)
-                and stable is not False
-                and (frac is None or frac >= 0.975)
-            )
-        out[key] = TsoVerdict(
-            product=key,
-            stability_threshold=thr,
-            stability_margin_band=mb.margin,
-            omega_stability_band=mb.omega,
-            stability_margin_wide=None if mw is None else mw.margin,
-            omega_stability_wide=None if mw is None else mw.omega,
-            closed_loop_stable=stable,
-            encirclements_ccw=None if enc is None else enc.ccw,
-            performance_ratio=perf.ratio,
-            omega_performance=perf.omega,
-            k_red_dyn=perf.k_red_dyn,
-            k_red_dyn_min=k_min,
-            stability_margin_wide_at_k_red=m_k,
-            passed=not reasons,
-            reasons=tuple(reasons),
-            notes=tuple(notes),
-            stability_margin_band_lower=mb_lo,
-            stability_margin_wide_lower=mw_lo,
-            performance_ratio_upper=r_up,
-            k_red_dyn_lower=k_lo,
-            closed_loop_stable_fraction=frac,
-            passed_at_bound=passed_bound,
-            extras=extras,
-        )
+        checks = _check_product(su, key, thr, F_sd if F_samples is None else None)
+        bounds = _bounds_from_sd(checks) if F_samples is None else _bounds_from_samples(su, key, F_samples)
+        out[key] = _verdict(checks, bounds, su, exact=F_sd is None and F_samples is None)
     return out
 
 

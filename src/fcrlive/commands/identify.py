@@ -32,6 +32,14 @@ def configure(p: argparse.ArgumentParser) -> None:
         help="speed damping Kd [pu] for the effective droop 1/(1/G_1(0) - Kd) (default 0)",
     )
     p.add_argument(
+        "--h",
+        type=float,
+        default=None,
+        metavar="H",
+        help="inertia constant H [s] on the machine base (generator data sheet; default: from --plant); "
+        "with it, logs without excitation or slower than the controller use the lowband method",
+    )
+    p.add_argument(
         "--plant",
         type=Path,
         metavar="PLANT.toml",
@@ -40,7 +48,7 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--method",
         default="auto",
-        choices=("auto", "zu", "zur", "zcu", "sine"),
+        choices=("auto", "zu", "zur", "zcu", "sine", "lowband"),
         help="identification method (default: auto, see docs/identify.md)",
     )
     p.add_argument("--ts-id", type=float, default=0.5, help="identification sample time [s] (default 0.5)")
@@ -56,36 +64,104 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fcrlive.analysis.identify import identify_files
+    from fcrlive.analysis.identify import identify_full
     from fcrlive.analysis.report import text_summary
+    from fcrlive.commands._identify_guard import (
+        identification_error,
+        read_signals,
+        screen_result,
+        with_log_notes,
+    )
     from fcrlive.errors import UserError
 
-    if not args.rated_mw > 0:
-        raise UserError(f"--rated-mw must be positive, got {args.rated_mw:g}", where="--rated-mw")
-    if not args.ts_id > 0:
-        raise UserError(f"--ts-id must be positive, got {args.ts_id:g}", where="--ts-id")
+    _check_options(args)
     plant = None
     if args.plant is not None:
         from fcrlive.plant.description import load_plant
 
         plant = load_plant(args.plant)
-    res = identify_files(
-        args.files,
-        rated_mw=args.rated_mw,
-        f0=args.f0,
-        kd=args.kd,
-        plant=plant,
-        method=args.method,
-        ts_id=args.ts_id,
-        t_fme_s=args.fme,
-    )
+    signals = read_signals(args.files, args.rated_mw, args.f0)
+    try:
+        res = identify_full(
+            signals,
+            rated_mw=args.rated_mw,
+            f0=args.f0,
+            kd=args.kd,
+            plant=plant,
+            method=args.method,
+            ts_id=args.ts_id,
+            t_fme_s=args.fme,
+            h=args.h,
+        )
+    except UserError as exc:
+        raise identification_error(exc, args.files) from None
+    res = with_log_notes(screen_result(res, args.files), signals)
     if args.plot is not None:
-        _plots(args.plot, res)
+        try:
+            _plots(args.plot, res)
+        except OSError as exc:
+            raise UserError(
+                f"cannot write the plots to {args.plot}: {exc.strerror or exc} (give a writable directory)",
+                where="--plot",
+            ) from None
     if args.json:
-        print(json.dumps(res.report.to_json_dict(), indent=2, allow_nan=False))
+        print(json.dumps(_json_safe(res.report.to_json_dict()), indent=2, allow_nan=False))
     else:
         print(text_summary(res.report))
     return 0
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """One-line errors for option values that would give nonsense (NaN, inf, zero or negative), and a
+    --plot directory that cannot be written, before the identification spends time."""
+    import math
+
+    from fcrlive.errors import UserError
+
+    positive = {"--rated-mw": args.rated_mw, "--f0": args.f0, "--ts-id": args.ts_id}
+    if args.fme is not None:
+        positive["--fme"] = args.fme
+    for opt, value in positive.items():
+        if not (math.isfinite(value) and value > 0):
+            raise UserError(f"{opt} must be a positive finite number, got {value:g}", where=opt)
+    if not math.isfinite(args.kd):
+        raise UserError(f"--kd must be a finite number [pu], got {args.kd:g}", where="--kd")
+    if args.h is not None and not (math.isfinite(args.h) and args.h > 0):
+        raise UserError(f"--h must be a positive finite number [s], got {args.h:g}", where="--h")
+    if args.plot is not None:
+        _check_plot_dir(args.plot)
+
+
+def _check_plot_dir(folder: Path) -> None:
+    import os
+    import tempfile
+
+    from fcrlive.errors import UserError
+
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise UserError(
+            f"cannot write plots to {folder}: {exc.strerror or exc} (give a writable directory)",
+            where="--plot",
+        ) from None
+    if not os.access(folder, os.W_OK):
+        raise UserError(f"cannot write plots to {folder} (give a writable directory)", where="--plot")
+
+
+def _json_safe(doc):
+    """The document with every non-finite float as null: JSON has no NaN or infinity."""
+    import math
+
+    if isinstance(doc, float):
+        return doc if math.isfinite(doc) else None
+    if isinstance(doc, dict):
+        return {k: _json_safe(v) for k, v in doc.items()}
+    if isinstance(doc, (list, tuple)):
+        return [_json_safe(v) for v in doc]
+    return doc
 
 
 def _plots(folder: Path, res) -> None:
@@ -96,34 +172,14 @@ def _plots(folder: Path, res) -> None:
 
     folder.mkdir(parents=True, exist_ok=True)
     a = res.assessment
+    ts = res.report.identification_ts_s
+    wmax = float(np.pi / ts) * 0.999 if ts else None
     if a.responses is not None:
-        fr = a.responses
-        wmax = float(np.pi / res.report.identification_ts_s) * 0.999
-        w = np.geomspace(1e-3, wmax, 600)
-        R = fr(w)
+        R = a.responses(np.geomspace(1e-3, wmax, 600))
         for key in ("G_1", "S", "G_p"):
             if key in R:
-                g = R[key]
-                val = dict(zip(w, g.value))
-                sd = dict(zip(w, np.hypot(g.sd_real, g.sd_imag)))
-
-                def interp(x, d=val):
-                    x = np.asarray(x, float)
-                    ks = np.array(list(d.keys()))
-                    vs = np.array(list(d.values()))
-                    return np.interp(np.log(x), np.log(ks), vs.real) + 1j * np.interp(
-                        np.log(x), np.log(ks), vs.imag
-                    )
-
-                plots.plot_bode(
-                    folder / f"bode_{key}.png",
-                    [(key, interp)],
-                    omega=w,
-                    sd={key: lambda x, d=sd: interp(x, d)},
-                    title=f"{key} ({a.method})",
-                )
+                plots.plot_bode(folder / f"bode_{key}.png", [(key, R[key])], title=f"{key} ({a.method})")
     if a.F_callable is not None:
-        wmax = float(np.pi / res.report.identification_ts_s) * 0.999
         plots.plot_nyquist(folder / "nyquist_FG.png", a.F_callable, FCRN_STABILITY, omega_range=(1e-4, wmax))
         k = a.tso["fcrn"].k_red_dyn if a.tso else None
         plots.plot_performance(
@@ -132,7 +188,7 @@ def _plots(folder: Path, res) -> None:
     elif a.gp_kind == "G_req" and a.f:
         w = np.array([2 * np.pi / p.period_s for p in a.f])
         F = np.array([p.value for p in a.f])
-        sd = [(p.abs_hi - abs(p.value)) / 1.96 for p in a.f]
+        sd = res.experiment.F_sd
         plots.plot_bode(
             folder / "bode_F_sine.png",
             [],

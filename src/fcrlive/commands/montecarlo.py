@@ -57,7 +57,9 @@ def run(args: argparse.Namespace) -> int:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     import time
 
-    from fcrlive.analysis.montecarlo import StudyConfig, markdown_table, run_study
+    from fcrlive.analysis.montecarlo.config import StudyConfig
+    from fcrlive.analysis.montecarlo.runner import run_study
+    from fcrlive.analysis.montecarlo.tables import markdown_table
     from fcrlive.errors import UserError
 
     if args.workers is not None and args.workers < 1:

@@ -24,7 +24,8 @@ from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from fcrlive.daemon.modbus_source import SourceStats, backoff_delays, paced_ticks
+from fcrlive.canbus import close_bus, open_bus_retrying
+from fcrlive.daemon.pacing import SourceStats, paced_ticks
 from fcrlive.daemon.sample import (
     COUNTER_NAME,
     DEVICE_TIME_NAME,
@@ -48,8 +49,9 @@ def load_dbc(path: str | Path):
 
 
 def rx_messages(db) -> list:
-    """Messages the daemon receives: all except those sent by the node ``FCRLIVE``."""
-    return [m for m in db.messages if OWN_NODE not in (m.senders or [])]
+    """Messages the daemon samples: all except those sent by the node ``FCRLIVE`` and the CAN FD
+    per-sample frames (one per controller sample, docs/buffered-acquisition.md: not snapshot bursts)."""
+    return [m for m in db.messages if OWN_NODE not in (m.senders or []) and not m.is_fd]
 
 
 def dbc_signal_names(path: str | Path) -> tuple[str, ...]:
@@ -109,36 +111,17 @@ class CanSource:
         self._close()
 
     def _close(self) -> None:
-        if self._notifier is not None:
-            self._notifier.stop(timeout=1.0)
-            self._notifier = None
-        if self.bus is not None:
-            self.bus.shutdown()
-            self.bus = None
+        close_bus(self._notifier, self.bus)
+        self._notifier = self.bus = None
         self.stats.connected = False
 
     async def _open_loop(self) -> None:
-        import can
-
-        delays = backoff_delays(0.2, self.p.backoff_max_s)
-        while self.bus is None:
-            try:
-                kw = {"bitrate": self.p.bitrate} if self.p.bitrate else {}
-                bus = can.Bus(interface=self.p.interface, channel=self.p.channel, **kw)
-            except Exception as exc:  # python-can raises many types (CanError, OSError, ValueError)
-                self.stats.connect_failures += 1
-                if self.stats.connect_failures in (1, 10) or self.stats.connect_failures % 100 == 0:
-                    log.warning("can open failed interface=%s channel=%s error=%r", self.p.interface,
-                                self.p.channel, str(exc))
-                await asyncio.sleep(next(delays))
-                continue
-            self.bus = bus
-            self._notifier = can.Notifier(bus, [self._on_message], timeout=0.1,
-                                          loop=asyncio.get_running_loop())
-            self.stats.connects += 1
-            self.stats.connected = True
-            log.info("can open interface=%s channel=%s signals=%d", self.p.interface, self.p.channel,
-                     len(self.names))
+        self.bus, self._notifier = await open_bus_retrying(
+            self.p.interface, self.p.channel, self.p.bitrate, self._on_message, self.stats, log,
+            backoff_max_s=self.p.backoff_max_s,
+        )
+        log.info("can open interface=%s channel=%s signals=%d", self.p.interface, self.p.channel,
+                 len(self.names))
 
     def _on_message(self, msg) -> None:
         """Runs on the event loop (Notifier with ``loop``): decode and assemble bursts."""

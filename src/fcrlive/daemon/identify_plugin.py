@@ -1,4 +1,4 @@
-"""The daemon's default identification plug-in: a stored window → PlantSignals → identify → report JSON.
+"""The daemon's default identification plug-in: a stored window → PlantSignals → identify → IdentifyReport.
 
 ``[identification] function = "fcrlive.daemon.identify_plugin:identify_window"`` (the default). Runs in
 the worker process (:mod:`fcrlive.daemon.worker`), so it may take seconds of CPU.
@@ -18,10 +18,12 @@ From the window arrays (see the worker's plug-in contract) to the paper's signal
 - ``c = controller_output/100``, ``a = guide_vane/100`` when present (% of full opening).
 
 Only quality-OK samples with finite values are used. They are put on a uniform grid with the median
-sample interval by linear interpolation between neighbouring good samples; wherever two good samples are
-more than ``MAX_GAP`` (2.5) intervals apart (bad samples, daemon down, device restart: its clock jumps
-back) the data is split into separate segments, and segments shorter than ``MIN_SEGMENT`` grid points are
-dropped, so no filter of the identification runs across a gap.
+sample interval by linear interpolation between neighbouring good samples
+(:func:`fcrlive.signals.resample_uniform`). Gaps follow the one gap rule of :mod:`fcrlive.signals`:
+a gap of ``MAX_FILL`` (1) missing sample is interpolated over; at a longer one (bad samples, daemon
+down) or where the time goes back (device restart: its clock jumps back) the data is split into separate
+segments, and segments shorter than ``MIN_SEGMENT`` grid points are dropped, so no filter of the
+identification runs across a gap.
 
 Accuracy depends on the sample interval in the device's time: Z_u (no excitation) needs ~0.1-0.2 s. A
 simulator accelerated 60× and polled at 50 Hz gives 1.2 s and unusable droop estimates (docs/daemon.md).
@@ -30,16 +32,17 @@ simulator accelerated 60× and polled at 50 Hz gives 1.2 s and unusable droop es
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from fcrlive.analysis.report import IdentifyReport
+
 MIN_SEGMENT = 50
-MAX_GAP = 2.5
-"""Good samples further apart than this many median intervals start a new segment."""
 """Shortest segment kept [grid points]."""
-EXCITATION_THRESHOLD_HZ = 1e-3
-"""Peak-to-peak of excitation_applied above which the window counts as excited [Hz]."""
+MAX_FILL = 1
+"""Gaps of at most this many missing samples are interpolated over; longer ones start a new segment."""
 
 
 def _finite(signals: dict[str, np.ndarray], name: str, ok: np.ndarray) -> bool:
@@ -48,10 +51,10 @@ def _finite(signals: dict[str, np.ndarray], name: str, ok: np.ndarray) -> bool:
 
 
 def window_to_plant_signals(signals: dict[str, np.ndarray], rated_mw: float, f0: float = 50.0):
-    """The :class:`fcrlive.tso.signals.PlantSignals` of a window (module docstring); DataError when the
+    """The :class:`fcrlive.signals.PlantSignals` of a window (module docstring); DataError when the
     window has no usable data."""
     from fcrlive.errors import DataError
-    from fcrlive.tso.signals import PlantSignals
+    from fcrlive.signals import PlantSignals, find_gaps, is_excited, median_interval, resample_uniform
 
     sig = {k: np.asarray(v, dtype=np.float64) for k, v in signals.items()}
     if "power" not in sig:
@@ -82,13 +85,10 @@ def window_to_plant_signals(signals: dict[str, np.ndarray], rated_mw: float, f0:
     idx = np.flatnonzero(ok)
     t = tt[idx]
     # a device restart sets its clock back: keep the order of arrival, split where time does not advance
-    dt = np.diff(t)
-    pos = dt[dt > 0]
-    if pos.size == 0:
+    Ts = median_interval(t)
+    if math.isnan(Ts):
         raise DataError("sample times do not advance")
-    Ts = float(np.median(pos))
-    breaks = np.flatnonzero((dt <= 0) | (dt > MAX_GAP * Ts)) + 1
-    pieces = np.split(np.arange(idx.size), breaks)
+    gaps = find_gaps(t, ts=Ts, max_fill=MAX_FILL)
 
     def col(name: str) -> np.ndarray:
         return sig[name][idx]
@@ -99,28 +99,12 @@ def window_to_plant_signals(signals: dict[str, np.ndarray], rated_mw: float, f0:
     for n in ("controller_output", "guide_vane"):
         if n in sig:
             raw[n] = col(n)
-    out: dict[str, list[np.ndarray]] = {k: [] for k in raw}
-    tgrid: list[np.ndarray] = []
-    segments: list[tuple[int, int]] = []
-    n_total = 0
-    t_offset = 0.0
-    for p in pieces:
-        if p.size < 2:
-            continue
-        tp = t[p]
-        n = math.floor((tp[-1] - tp[0]) / Ts + 1e-9) + 1
-        if n < MIN_SEGMENT:
-            continue
-        g = tp[0] + Ts * np.arange(n)
-        for k, v in raw.items():
-            out[k].append(np.interp(g, tp, v[p]))
-        tgrid.append(g - g[0] + t_offset)
-        t_offset += n * Ts + 1000.0 * Ts  # segments apart on the time axis
-        segments.append((n_total, n_total + n))
-        n_total += n
+    grid = resample_uniform(t, raw, Ts, gaps.segments, MIN_SEGMENT)
+    segments = grid.segments
+    n_total = grid.t.size
     if not segments:
         raise DataError(f"no gap-free stretch of at least {MIN_SEGMENT} samples in the window")
-    cat = {k: np.concatenate(v) for k, v in out.items()}
+    cat = grid.columns
     p_mw = cat["power"]
     p0 = float(np.mean(p_mw))
     u = (p_mw - p0) / rated_mw
@@ -134,13 +118,13 @@ def window_to_plant_signals(signals: dict[str, np.ndarray], rated_mw: float, f0:
     else:
         y = (cat["y"] - f0) / f0
         notes.append("y = (grid_freq − f0)/f0 (no control_error or speed point)")
-    has_exc = bool(np.ptp(cat["exc"]) > EXCITATION_THRESHOLD_HZ)
+    has_exc = is_excited(cat["exc"])
     if has_exc:
         notes.append(f"r from {rname}")
     if len(segments) > 1:
         notes.append(f"window split into {len(segments)} gap-free segments")
     return PlantSignals(
-        t=np.concatenate(tgrid), Ts=Ts, u=u, y=y, r=r, epsilon=r - y,
+        t=grid.t, Ts=Ts, u=u, y=y, r=r, epsilon=r - y,
         c=cat["controller_output"] / 100.0 if "controller_output" in cat else None,
         a=cat["guide_vane"] / 100.0 if "guide_vane" in cat else None,
         rated_mw=float(rated_mw), f0=float(f0), p0_mw=p0, has_excitation=has_exc,
@@ -150,8 +134,10 @@ def window_to_plant_signals(signals: dict[str, np.ndarray], rated_mw: float, f0:
 
 
 def identify_window(signals: dict[str, np.ndarray], rated_mw: float, f0: float = 50.0,
-                    plant: str | None = None, method: str = "auto", kd: float = 0.0, **_params: Any) -> dict:
-    """The plug-in: identify the window and return the report as JSON (``IdentifyReport.to_json_dict``).
+                    plant: str | None = None, method: str = "auto", kd: float = 0.0,
+                    **_params: Any) -> IdentifyReport:
+    """The plug-in: identify the window and return the report, with how the window became signals at
+    the head of its ``notes``.
 
     ``plant`` is the path of a plant description file (its controller is used by ``zcu``) or None.
     Extra keyword parameters from newer daemons are accepted and ignored.
@@ -165,8 +151,4 @@ def identify_window(signals: dict[str, np.ndarray], rated_mw: float, f0: float =
 
         plant_obj = load_plant(plant)
     rep = identify_signals(ps, rated_mw=rated_mw, f0=f0, kd=kd, plant=plant_obj, method=method)
-    out = rep.to_json_dict()
-    out["notes"] = list(ps.notes) + list(out.get("notes") or [])
-    out["sample_interval_s"] = ps.Ts
-    out["segments"] = len(ps.segments)
-    return out
+    return rep.model_copy(update={"notes": [*ps.notes, *rep.notes]})

@@ -1,7 +1,8 @@
 """Modbus TCP source: polls a typed register map on absolute deadlines and yields :class:`Sample`.
 
 Only moves data and schedules work; decoding and quality are the pure functions of
-:mod:`fcrlive.daemon.registers` and :mod:`fcrlive.daemon.sample`.
+:mod:`fcrlive.modbus.registers` and :mod:`fcrlive.daemon.sample`; the parameters are
+:class:`fcrlive.modbus.client.ModbusParams`, the tick schedule :func:`fcrlive.daemon.pacing.paced_ticks`.
 
 Robustness, following what Telegraf / Home Assistant users complain about (libraries.md):
 
@@ -19,100 +20,23 @@ import asyncio
 import contextlib
 import logging
 import math
-import random
 import time
 from collections.abc import AsyncIterator
-from dataclasses import dataclass, field
 
-from fcrlive.daemon.registers import RegisterMap, decode_block, encode_point, plan_reads
+from fcrlive.backoff import backoff_delays
+from fcrlive.daemon.pacing import SourceStats, paced_ticks
 from fcrlive.daemon.sample import (
     COUNTER_NAME,
     DEVICE_TIME_NAME,
     Quality,
     Sample,
-    Ticker,
     classify,
     empty_values,
 )
+from fcrlive.modbus.client import ModbusParams, quiet_pymodbus
+from fcrlive.modbus.registers import decode_block, encode_point, plan_reads
 
 log = logging.getLogger("fcrlive.modbus")
-
-
-def quiet_pymodbus() -> None:
-    """Silence pymodbus's own logging: it logs an ERROR per timed-out request (50 lines/s at 50 Hz)."""
-    logging.getLogger("pymodbus").setLevel(logging.CRITICAL + 1)
-
-
-@dataclass(frozen=True)
-class ModbusParams:
-    """Connection and polling parameters (see ``config.ModbusConfig`` for meanings and units)."""
-
-    host: str
-    port: int
-    register_map: RegisterMap
-    poll_hz: float = 20.0
-    timeout_s: float = 0.2
-    retries: int = 0
-    watchdog_failures: int = 10
-    backoff_min_s: float = 0.1
-    backoff_max_s: float = 5.0
-    sample_tables: tuple[str, ...] = ("input",)
-    """Tables sampled at ``poll_hz``: the measurements. Holding registers are settings/commands
-    (excitation offset, limits) read on demand with :meth:`ModbusSource.read_points`."""
-
-    @classmethod
-    def from_config(cls, cfg) -> ModbusParams:
-        """From a validated ``config.ModbusConfig``."""
-        return cls(host=cfg.host, port=cfg.port, register_map=cfg.load_map(), poll_hz=cfg.poll_hz,
-                   timeout_s=cfg.timeout_s, retries=cfg.retries, watchdog_failures=cfg.watchdog_failures,
-                   backoff_max_s=cfg.backoff_max_s)
-
-
-@dataclass
-class SourceStats:
-    """Counters of a source since start (read by the metrics collector)."""
-
-    polls: int = 0
-    samples: dict[Quality, int] = field(default_factory=lambda: dict.fromkeys(Quality, 0))
-    missed_ticks: int = 0
-    connects: int = 0
-    connect_failures: int = 0
-    watchdog_resets: int = 0
-    connected: bool = False
-
-    @property
-    def reconnects(self) -> int:
-        """Successful connects after the first one."""
-        return max(0, self.connects - 1)
-
-
-def backoff_delays(minimum: float, maximum: float, rng: random.Random | None = None):
-    """Infinite bounded exponential backoff with ±20 % jitter: min, 2·min, … capped at ``maximum`` [s]."""
-    rng = rng or random.Random()
-    d = minimum
-    while True:
-        yield min(maximum, d) * rng.uniform(0.8, 1.2)
-        d = min(maximum, d * 2)
-
-
-async def paced_ticks(poll_hz: float, stats: SourceStats, names) -> AsyncIterator[int | Sample]:
-    """Ticks on absolute deadlines at ``poll_hz`` (both sources use it): for every tick that was skipped
-    because the previous one overran, a MISSING :class:`Sample` (counted in ``stats``; no catch-up
-    burst of reads), then the index of the current tick once its deadline has come: poll then."""
-    loop = asyncio.get_running_loop()
-    ticker = Ticker(loop.time(), 1.0 / poll_hz)
-    while True:
-        idx, skipped = ticker.advance(loop.time())
-        if skipped:
-            stats.missed_ticks += skipped
-            offset = time.time() - loop.time()
-            for k in range(idx - skipped, idx):
-                stats.samples[Quality.MISSING] += 1
-                yield Sample(ticker.deadline(k) + offset, math.nan, k, empty_values(names), Quality.MISSING)
-        wait = ticker.deadline(idx) - loop.time()
-        if wait > 0:
-            await asyncio.sleep(wait)
-        yield idx
 
 
 class ModbusSource:

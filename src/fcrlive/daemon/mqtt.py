@@ -7,7 +7,8 @@ newest message per topic (that is all a retained topic can show anyway), the oth
 ``aiomqtt.MqttError`` with bounded exponential backoff.
 
 On connect: retained ``status`` = "online" (the will, set at CONNECT, is a retained "offline"),
-Home Assistant discovery configs when enabled, then the queue is flushed. On a clean exit the
+the last ``excitation`` state again (:data:`STICKY`: a restarted broker may have lost it), Home Assistant
+discovery configs when enabled, then the queue is flushed. On a clean exit the
 publisher flushes (briefly), publishes "offline" itself and disconnects.
 """
 
@@ -26,8 +27,9 @@ from dataclasses import dataclass
 import aiomqtt
 from pydantic import BaseModel
 
-from fcrlive.daemon.modbus_source import backoff_delays
-from fcrlive.daemon.payloads import TOPICS, is_data_skip, to_bytes
+from fcrlive.backoff import backoff_delays
+from fcrlive.daemon.payloads import TOPICS, to_bytes
+from fcrlive.errors import ConfigError
 
 log = logging.getLogger("fcrlive.mqtt")
 
@@ -56,6 +58,15 @@ def tls_context(tls) -> ssl.SSLContext:
     return ctx
 
 
+LIVE_SENSOR_CLASSES = {"power": ("MW", "power"), "grid_freq": ("Hz", "frequency")}
+"""Home Assistant ``(unit_of_measurement, device_class)`` of the live signals (the simulated governor's
+register map units; HA's power and frequency device classes accept MW and Hz)."""
+
+STICKY = ("excitation",)
+"""Retained topics published again on every (re)connect: a broker restarted without persistence has lost
+them, and the excitation's state (writing to the governor or not) must always be visible."""
+
+
 def discovery_configs(prefix: str, unit: str, discovery_prefix: str = "homeassistant",
                       live_signals: tuple[str, ...] = ("power", "grid_freq")) -> dict[str, dict]:
     """Home Assistant MQTT discovery configs: ``{config topic: payload}`` (retained sensors)."""
@@ -72,10 +83,14 @@ def discovery_configs(prefix: str, unit: str, discovery_prefix: str = "homeassis
         "result_quality": (f"{prefix}/result_quality", "{{ value_json.level }}", None, "Result quality"),
         "tso_fcrn": (f"{prefix}/tso/fcrn", "{{ value_json.verdict }}", None, "FCR-N verdict"),
         "tso_fcrd": (f"{prefix}/tso/fcrd", "{{ value_json.verdict }}", None, "FCR-D verdict"),
+        "tso_fcrd_up": (f"{prefix}/tso/fcrd_up", "{{ value_json.verdict }}", None, "FCR-D upwards verdict"),
+        "tso_fcrd_down": (f"{prefix}/tso/fcrd_down", "{{ value_json.verdict }}", None,
+                          "FCR-D downwards verdict"),
     }
     for s in live_signals:
         template = f"{{{{ value_json.signals.{s}.mean }}}}"
-        sensors[f"live_{s}"] = (f"{prefix}/live", template, None, f"{s} (mean)")
+        unit_of_measurement, _ = LIVE_SENSOR_CLASSES.get(s, (None, None))
+        sensors[f"live_{s}"] = (f"{prefix}/live", template, unit_of_measurement, f"{s} (mean)")
     out = {}
     for key, (topic, template, unit_of_measurement, name) in sensors.items():
         object_id = f"{dev_id}_{key}"
@@ -85,6 +100,10 @@ def discovery_configs(prefix: str, unit: str, discovery_prefix: str = "homeassis
         if unit_of_measurement:
             cfg["unit_of_measurement"] = unit_of_measurement
             cfg["state_class"] = "measurement"
+        if key.startswith("live_"):
+            _, device_class = LIVE_SENSOR_CLASSES.get(key.removeprefix("live_"), (None, None))
+            if device_class:
+                cfg["device_class"] = device_class
         out[f"{discovery_prefix}/sensor/{object_id}/config"] = cfg
     return out
 
@@ -103,6 +122,8 @@ class MqttPublisher:
         self.live_signals = live_signals
         self.stats = PublisherStats()
         self._retained: OrderedDict[str, tuple[int, bytes, int]] = OrderedDict()
+        self._sticky_topics = {f"{self.prefix}/{t}" for t in STICKY}
+        self._sticky: dict[str, tuple[bytes, int]] = {}
         self._fifo: deque[tuple[str, bytes, int]] = deque()
         self._version = itertools.count()
         self._wake = asyncio.Event()
@@ -125,6 +146,8 @@ class MqttPublisher:
     def publish_raw(self, topic: str, data: bytes, retain: bool, qos: int = 1) -> None:
         """Queue bytes for an absolute ``topic``."""
         if retain:
+            if topic in self._sticky_topics:
+                self._sticky[topic] = (data, qos)
             self._retained[topic] = (next(self._version), data, qos)
             self._retained.move_to_end(topic)
         else:
@@ -180,6 +203,7 @@ class MqttPublisher:
             try:
                 async with self._client() as client:
                     await client.publish(self.status_topic, b"online", qos=1, retain=True)
+                    self._requeue_sticky()
                     self.stats.connects += 1
                     self.stats.connected = True
                     self.connected.set()
@@ -190,6 +214,13 @@ class MqttPublisher:
                     if self._stopping:
                         await client.publish(self.status_topic, b"offline", qos=1, retain=True)
                         return
+            except ConfigError as exc:  # the password file went away after the start checks
+                self.stats.connect_failures += 1
+                if self.stats.connect_failures in (1, 10) or self.stats.connect_failures % 100 == 0:
+                    log.error("mqtt cannot connect: %s", exc)
+                if self._stopping:
+                    return
+                await asyncio.sleep(next(delays))
             except aiomqtt.MqttError as exc:
                 was = self.stats.connected
                 self.stats.connected = False
@@ -204,6 +235,14 @@ class MqttPublisher:
             finally:
                 self.stats.connected = False
                 self.connected.clear()
+
+    def _requeue_sticky(self) -> None:
+        """Queue the last message of each :data:`STICKY` topic again (unless a newer one is waiting)."""
+        for topic, (data, qos) in self._sticky.items():
+            if topic not in self._retained:
+                self._retained[topic] = (next(self._version), data, qos)
+                self._idle.clear()
+                self._wake.set()
 
     async def _session(self, client: aiomqtt.Client) -> None:
         """Run sender and listener until the connection drops (MqttError) or we stop."""
@@ -254,15 +293,3 @@ class MqttPublisher:
             self._wake.clear()
             await self._wake.wait()
 
-
-async def first_identification(host: str, port: int, unit: str, timeout_s: float) -> dict:
-    """The first ``fcrlive/<unit>/result/latest`` message (JSON) of a run that was not skipped for too
-    little data, read as a dashboard would (tests, benchmarks). Raises TimeoutError after ``timeout_s``."""
-    async with aiomqtt.Client(host, port) as client:
-        await client.subscribe(f"fcrlive/{unit}/result/latest", qos=1)
-        async with asyncio.timeout(timeout_s):
-            async for m in client.messages:
-                msg = json.loads(m.payload)
-                if not is_data_skip(msg):
-                    return msg
-    raise aiomqtt.MqttError("the broker closed the subscription")

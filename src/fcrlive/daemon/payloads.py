@@ -8,13 +8,14 @@ rewrites the documentation from the models below, so the JSON Schemas in the doc
 from __future__ import annotations
 
 import json
-import math
 import sys
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
+
+from fcrlive.analysis.report import Bounds, IdentifyReport, PeakCI, ValueCI
 
 
 def iso(t: float) -> str:
@@ -70,6 +71,10 @@ class ResultQuality(_Payload):
                                description='why not ok, "<key>: ..." per number; the error of a failed run')
     quantities: dict[str, QuantityQuality] = Field(
         default_factory=dict, description="the verdict per judged number (droop, max_abs_s, max_abs_g1)")
+    not_identifiable: dict[str, str] = Field(
+        default_factory=dict,
+        description="quantities the identification says this window cannot give (max_abs_s, max_abs_g1, gp, "
+                    "tso, ...) -> why; not judged, and their topics keep the last published values")
 
 
 class ResultQualityPayload(ResultQuality):
@@ -91,7 +96,8 @@ class ResultPayload(_Payload):
     error: str | None = None
     duration_s: float = Field(description="wall time of the identification [s]")
     quality: DataQuality
-    result: dict[str, Any] | None = Field(description="the identification plug-in's JSON (to_json())")
+    result: IdentifyReport | None = Field(
+        description="the identification report (docs/identify.md), null when the run was skipped or failed")
     result_quality: ResultQuality | None = Field(
         None, description="the quality rule's verdict; rejected also for a skipped or failed run")
 
@@ -115,15 +121,16 @@ class ExcitationEventPayload(_Payload):
 
 
 class ScalarPayload(_Payload):
-    """``droop``, ``max_abs_s``, ``max_abs_g1``: one estimated number with its uncertainty (retained)."""
+    """``droop``, ``max_abs_s``, ``max_abs_g1``: one estimated number with its 95 % interval (retained)."""
 
     t: float = Field(description="when the estimate was made [UNIX s]")
     window_end: float = Field(description="end of the data window it is based on [UNIX s]")
     value: float | None
-    std: float | None = Field(None, description="standard deviation of the estimate (same unit)")
-    ci95: list[float | None] | None = Field(None, description="95 % interval [lo, hi] (same unit)")
+    ci95: Bounds = Field(description="95 % interval [lower, upper] (same unit; not symmetric in general, "
+                                     "e.g. the droop's); an end is null where unknown")
     omega: float | None = Field(None, description="for peaks: ω of the maximum [rad/s]")
     unit: str = ""
+    reason: str | None = Field(None, description="why value is null (not identifiable from this window)")
     quality: QuantityQuality | None = Field(None, description="the quality rule's verdict on this number")
 
 
@@ -133,9 +140,14 @@ class TsoVerdictPayload(_Payload):
     t: float
     window_end: float
     product: Literal["fcrn", "fcrd", "fcrd_up", "fcrd_down"]
-    verdict: Literal["pass", "fail", "unknown"]
+    verdict: Literal["pass", "fail", "undecided", "unknown"] = Field(
+        description="the report's `decision`: pass/fail only when the 95 % interval of every margin is "
+                    "clear of its limit, undecided otherwise (docs/tso-checks.md); unknown: G_p not "
+                    "identifiable")
     details: dict[str, Any] = Field(default_factory=dict,
-                                    description="margins etc. as given by the analysis plug-in")
+                                    description="the report's `tso.<product>` without `pass` (margins "
+                                                "with their 95 % bounds, reasons, ...), or `{reason}` when "
+                                                "unknown")
 
 
 class GpPayload(_Payload):
@@ -201,99 +213,86 @@ TOPICS: tuple[Topic, ...] = (
 )
 
 
-def _num(x: Any) -> float | None:
-    try:
-        f = float(x)
-    except (TypeError, ValueError):
-        return None
-    return f if math.isfinite(f) else None
-
-
-def _scalar(x: Any, t: float, t2: float, unit: str, percent: bool = False) -> ScalarPayload | None:
-    """A number, ``{value, std, unit}`` (as given) or the report's ``{value, ci95[, omega]}`` form
-    (``percent``: a fraction shown in %, e.g. the report's droop 0.08 → 8 %)."""
-    if isinstance(x, dict):
-        if "unit" not in x and "ci95" in x:  # IdentifyReport form (docs/identify.md)
-            k = 100.0 if percent else 1.0
-            ci = x.get("ci95") or [None, None]
-            lo, hi = (_num(c) for c in [*ci, None, None][:2])
-            std = (hi - lo) / (2 * 1.959964) * k if lo is not None and hi is not None else None
-            v = _num(x.get("value"))
-            return ScalarPayload(t=t, window_end=t2, value=None if v is None else v * k, std=std,
-                                 ci95=[None if lo is None else lo * k, None if hi is None else hi * k],
-                                 omega=_num(x.get("omega")), unit=unit)
-        return ScalarPayload(t=t, window_end=t2, value=_num(x.get("value")), std=_num(x.get("std")),
-                             unit=str(x.get("unit", unit)))
-    v = _num(x)
-    return None if v is None and x is None else ScalarPayload(t=t, window_end=t2, value=v, unit=unit)
-
-
 TSO_PRODUCTS = ("fcrn", "fcrd", "fcrd_up", "fcrd_down")
 
 
 HEADLINE_SCALARS = ("droop", "max_abs_s", "max_abs_g1")
 
 
-def headline_scalars(r: dict[str, Any], t: float = 0.0, t2: float = 0.0) -> dict[str, ScalarPayload]:
-    """``droop`` [%], ``max_abs_s`` and ``max_abs_g1`` of a plug-in's JSON as they are published; keys
-    that are absent or null are left out."""
-    out: dict[str, ScalarPayload] = {}
+def _scalar(x: ValueCI | PeakCI, t: float, t2: float, unit: str, scale: float = 1.0,
+            not_identifiable_reason: str | None = None) -> ScalarPayload:
+    """One headline number of the report as published (``scale`` 100: the droop fraction in %)."""
+    lo, hi = (None if c is None else c * scale for c in x.ci95)
+    if x.value is None:  # not identifiable: no number, no interval, no ω (even if the report kept one)
+        return ScalarPayload(t=t, window_end=t2, value=None, ci95=(None, None), unit=unit,
+                             reason=x.reason or not_identifiable_reason)
+    return ScalarPayload(t=t, window_end=t2, value=x.value * scale,
+                         ci95=(lo, hi), omega=x.omega if isinstance(x, PeakCI) else None, unit=unit)
+
+
+def not_identifiable(r: IdentifyReport) -> dict[str, str]:
+    """Quantity -> why the identification could not give it from this window: the report's
+    ``not_identifiable`` and the reason of any headline quantity that is null with one."""
+    out = dict(r.not_identifiable)
     for key in HEADLINE_SCALARS:
-        droop = key == "droop"
-        if key in r and (p := _scalar(r[key], t, t2, "%" if droop else "", percent=droop)):
-            out[key] = p
+        x = getattr(r, key)
+        if x is not None and x.value is None and x.reason:
+            out.setdefault(key, x.reason)
     return out
+
+
+def headline_scalars(r: IdentifyReport, t: float = 0.0, t2: float = 0.0) -> dict[str, ScalarPayload]:
+    """``droop`` [%], ``max_abs_s`` and ``max_abs_g1`` of a report as they are published. The peaks the
+    method could not give (null in the report) and those the identification says this window cannot give
+    (null with a reason, :func:`not_identifiable`) are left out: never a number on their topics. The droop
+    is always there (null with its reason when not identifiable; the quality rule rejects such a run)."""
+    ni = not_identifiable(r)
+    out: dict[str, ScalarPayload] = {}
+    if r.droop is not None:
+        out["droop"] = _scalar(r.droop, t, t2, "%", 100.0, ni.get("droop"))
+    for key, x in (("max_abs_s", r.max_abs_s), ("max_abs_g1", r.max_abs_g1)):
+        if x is not None and key not in ni:
+            out[key] = _scalar(x, t, t2, "")
+    return out
+
+
+def _tso_verdicts(r: IdentifyReport, t: float, t2: float) -> dict[str, TsoVerdictPayload]:
+    """``tso/<product>`` of a report; ``tso`` null (G_p not identifiable) → ``unknown`` for FCR-N/D."""
+    if r.tso is None:
+        why = r.not_identifiable.get("tso") or r.not_identifiable.get("gp") or next(
+            (w for w in r.warnings if "G_p" in w or "excitation" in w),
+            "G_p not identifiable from this window")
+        return {f"tso/{k}": TsoVerdictPayload(t=t, window_end=t2, product=k, verdict="unknown",
+                                              details={"reason": why}) for k in ("fcrn", "fcrd")}
+    return {f"tso/{k}": TsoVerdictPayload(t=t, window_end=t2, product=k,
+                                          verdict=v.verdict,
+                                          details=v.model_dump(mode="json", exclude={"passed"}))
+            for k, v in r.tso.items() if k in TSO_PRODUCTS}
 
 
 def result_topics(res: ResultPayload) -> dict[str, BaseModel]:
     """Split a result into its topics: ``result/latest``, ``quality``, ``result_quality`` (when judged)
-    and, when the plug-in's JSON has them, ``droop``, ``max_abs_s``, ``max_abs_g1``, ``tso/<product>``,
-    ``gp``. Unknown keys stay in ``result/latest`` only; missing keys publish nothing (the previous
-    retained value stays).
+    and, from the report: ``droop``, ``max_abs_s``, ``max_abs_g1`` (those the method gives),
+    ``tso/<product>`` (``unknown`` for FCR-N and FCR-D when G_p was not identifiable) and ``gp``.
 
     A failed run or one whose ``result_quality`` is ``rejected`` publishes none of the headline topics
     (droop ... gp): a dashboard keeps showing the last acceptable values, each with its ``window_end``,
-    and reads why from ``result_quality``. Each published number carries its own verdict in ``quality``.
-
-    Both the simple form (``droop: {value, std, unit}``, ``tso: {fcrn: bool}``, ``gp: {periods_s, ...}``)
-    and the identification report of :mod:`fcrlive.analysis.report` are understood (droop as a
-    fraction with ``ci95`` → %, ``gp`` as a list of periods, ``tso: null`` when G_p was not
-    identifiable → ``unknown`` verdicts for FCR-N and FCR-D)."""
+    and reads why from ``result_quality``. Each published number carries its own verdict in ``quality``."""
     out: dict[str, BaseModel] = {"result/latest": res, "quality": res.quality}
     t, t2 = res.t, res.window.end
     rq = res.result_quality
     if rq is not None:
         out["result_quality"] = ResultQualityPayload(t=t, window_end=t2, **rq.model_dump())
-    if not res.ok or (rq is not None and rq.level == "rejected"):
+    r = res.result
+    if not res.ok or r is None or (rq is not None and rq.level == "rejected"):
         return out
-    r = res.result or {}
     for key, p in headline_scalars(r, t, t2).items():
         out[key] = p if rq is None or key not in rq.quantities else \
             p.model_copy(update={"quality": rq.quantities[key]})
-    tso = r.get("tso")
-    if "tso" in r and tso is None:
-        why = next((w for w in r.get("warnings") or [] if "G_p" in w or "excitation" in w),
-                   "G_p not identifiable from this window")
-        tso = {k: {"passed": None, "reason": why} for k in ("fcrn", "fcrd")}
-    for product, v in (tso or {}).items():
-        if product in TSO_PRODUCTS:
-            if isinstance(v, dict):
-                passed = v.get("passed", v.get("pass"))
-                details = {k: val for k, val in v.items() if k not in ("passed", "pass")}
-            else:
-                passed, details = v, {}
-            verdict = "unknown" if passed is None else ("pass" if passed else "fail")
-            out[f"tso/{product}"] = TsoVerdictPayload(t=t, window_end=t2, product=product, verdict=verdict,
-                                                      details=details)
-    gp = r.get("gp")
-    if isinstance(gp, dict) and "periods_s" in gp:
-        out["gp"] = GpPayload(t=t, window_end=t2, periods_s=[float(p) for p in gp["periods_s"]],
-                              gain=[_num(g) for g in gp.get("gain", [])],
-                              phase_deg=[_num(g) for g in gp.get("phase_deg", [])])
-    elif isinstance(gp, list) and gp and all(isinstance(p, dict) and "period_s" in p for p in gp):
-        out["gp"] = GpPayload(t=t, window_end=t2, periods_s=[float(p["period_s"]) for p in gp],
-                              gain=[_num(p.get("abs")) for p in gp],
-                              phase_deg=[_num(p.get("phase_deg")) for p in gp])
+    out.update(_tso_verdicts(r, t, t2))
+    if r.gp:
+        out["gp"] = GpPayload(t=t, window_end=t2, periods_s=[p.period_s for p in r.gp],
+                              gain=[p.abs for p in r.gp], phase_deg=[p.phase_deg for p in r.gp])
     return out
 
 
@@ -340,23 +339,26 @@ def render_docs() -> str:
         "",
         "## Mapping from the identification result",
         "",
-        "The identification plug-in returns a JSON object (its `to_json()`), published whole in",
-        "`result/latest.result`. These keys, when present, also get their own topics:",
+        "The identification plug-in returns the identification report of `fcrlive identify --json`",
+        "(`IdentifyReport`, docs/identify.md; the default plug-in is",
+        "`fcrlive.daemon.identify_plugin:identify_window`), published whole in `result/latest.result`.",
+        "These keys of it also get their own topics:",
         "",
-        "| key | form | topic |",
-        "|---|---|---|",
-        "| `droop` | number, `{value, std, unit}`, or the report's `{value, ci95}` (a fraction, shown in %)"
-        " | `droop` |",
-        "| `max_abs_s`, `max_abs_g1` | number, `{value, std}` or `{value, omega, ci95}` | same name |",
-        "| `tso.fcrn`, `tso.fcrd`, `tso.fcrd_up`, `tso.fcrd_down` | bool or `{passed, ...details}`"
-        " (`pass` also accepted) | `tso/<product>` |",
-        "| `tso` = `null` (no excitation: G_p not identifiable) | | `tso/fcrn`, `tso/fcrd` with verdict"
-        " `unknown` |",
-        "| `gp` | `{periods_s, gain, phase_deg}` or the report's list of `{period_s, abs, phase_deg, ...}`"
-        " | `gp` |",
+        "| key | topic |",
+        "|---|---|",
+        "| `droop` `{value, ci95}` (a fraction) | `droop`, in % (value and interval × 100) |",
+        "| `max_abs_s`, `max_abs_g1` `{value, omega, ci95}` (null: not given by the method) | same name |",
+        "| a quantity null with a `reason` or in `not_identifiable` (e.g. a peak from normal operation where"
+        " the coherence is too low) | not published on its topic (never a number): the topic keeps its last"
+        " value, the reason is in `result_quality.not_identifiable` |",
+        "| `tso.fcrn`, `tso.fcrd` (`{decision, pass, ...}`) | `tso/<product>`: verdict from `decision`"
+        " (pass / fail / undecided), the rest in `details` |",
+        "| `tso` = `null` (G_p not identifiable: no excitation, or `not_identifiable.tso`) | `tso/fcrn`,"
+        " `tso/fcrd` with verdict `unknown` and the reason in `details.reason` |",
+        "| `gp` (list of `{period_s, abs, phase_deg, abs_ci95, ...}`) | `gp` |",
         "",
-        "The default plug-in (`fcrlive.daemon.identify_plugin:identify_window`) returns the identification",
-        "report of `fcrlive identify --json` (docs/identify.md) plus `sample_interval_s` and `segments`.",
+        "Every published interval is the report's 95 % interval `[lower, upper]` as it is: the droop's is",
+        "not symmetric about its value, so no standard deviation is derived from it.",
         "",
         "## Result quality",
         "",
@@ -369,15 +371,22 @@ def render_docs() -> str:
         "line. A **rejected** run is published only there (and on `quality`): the headline topics `droop`,",
         "`max_abs_s`, `max_abs_g1`, `tso/*` and `gp` keep the last accepted values (their `window_end` says",
         "from when). An `uncertain` run updates them, and each number carries its own verdict in `quality`",
-        "(`{level, reasons}`), so a dashboard can grey it out.",
+        "(`{level, reasons}`), so a dashboard can grey it out. A TSO verdict `undecided` (the 95 % interval",
+        "of a margin reaches over its limit: `pass` is the point verdict) is a result, not a reason to",
+        "reject the run: it is published on `tso/<product>` like pass and fail.",
         "",
         "## Home Assistant discovery",
         "",
         "With `[mqtt] homeassistant_discovery = true` the daemon publishes retained sensor configs to",
         "`<discovery_prefix>/sensor/fcrlive_<unit>_<key>/config` (droop, max_abs_s, max_abs_g1, data",
-        "quality, result quality, live power and frequency, FCR-N/FCR-D verdicts), with",
-        "`availability_topic` = the status topic, and announces them again whenever",
-        "`<discovery_prefix>/status` says `online` (Home Assistant restarted).",
+        "quality, result quality, live power and frequency, FCR-N, FCR-D, FCR-D up and FCR-D down",
+        "verdicts), with `availability_topic` = the status topic, and announces them again whenever",
+        "`<discovery_prefix>/status` says `online` (Home Assistant restarted). The live power sensor has",
+        "`unit_of_measurement` MW, `device_class` power, the live frequency Hz and frequency, both",
+        "`state_class` measurement (so Home Assistant keeps long-term statistics of them).",
+        "",
+        "The retained `excitation` state is published again on every reconnect: a broker restarted",
+        "without persistence has lost it, and whether fcrlive writes to the governor must stay visible.",
         "",
         "## JSON Schemas",
         "",

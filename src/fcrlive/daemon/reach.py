@@ -1,4 +1,5 @@
-"""Reachability of the daemon's peers (Modbus device, MQTT broker): one attempt, one line of reason.
+"""Reachability of the daemon's peers (Modbus device, MQTT broker): one attempt, one line of reason; and
+the device's ``rated_power`` register against ``[unit] rated_mw`` (:func:`rating_problem`).
 
 Used by ``fcrlive check-config FILE --connect`` (exit 2 on failure) and at daemon start-up, where an
 unreachable device is reported once ("cannot reach 10.0.0.1:502 (connection refused); retrying") and
@@ -10,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import errno
+import math
 import socket
 
 
@@ -42,23 +44,66 @@ async def probe_tcp(host: str, port: int, timeout: float = 3.0) -> str | None:
     return None
 
 
-async def probe_modbus(mcfg, timeout: float = 3.0) -> str | None:
-    """TCP connect, then one read of the first input block with the configured unit id; None if OK."""
+RATED_POINT = "rated_power"
+"""The register-map point with the unit's rated power [MW], when the device exposes one."""
+RATED_TOLERANCE = 0.01
+"""``[unit] rated_mw`` may differ from the device's ``rated_power`` by this fraction (float32, rounding)."""
+
+
+def rating_problem(rated_mw: float, device_mw: float | None) -> str | None:
+    """One line when ``[unit] rated_mw`` disagrees with the device's rated power (None: agrees, or the
+    device gave no usable value). Every power in pu is divided by it: a 3× wrong rating makes a 7.9 %
+    droop read 2.6 %."""
+    if device_mw is None or not math.isfinite(device_mw) or device_mw <= 0:
+        return None
+    if abs(rated_mw - device_mw) <= RATED_TOLERANCE * device_mw:
+        return None
+    return (f"{rated_mw:g} MW, but the device's {RATED_POINT} register says {device_mw:g} MW; every droop "
+            f"would be off by a factor {device_mw / rated_mw:.3g}: fix [unit] rated_mw (or the register map)")
+
+
+async def read_rated_power(src) -> float | None:
+    """The device's rated power [MW] from a connected ModbusSource, None when its map has no
+    :data:`RATED_POINT`; ConnectionError when the read fails."""
+    from fcrlive.modbus.registers import plan_reads
+
+    point = next((p for p in src.map.points if p.name == RATED_POINT), None)
+    if point is None:
+        return None
+    values, why = await src._read_once(plan_reads([point]))
+    if values is None:
+        raise ConnectionError(why)
+    return float(values[RATED_POINT])
+
+
+async def _probe_modbus(mcfg, timeout: float, rated_mw: float | None) -> tuple[str | None, str | None]:
     reason = await probe_tcp(mcfg.host, mcfg.port, timeout)
     if reason is not None:
-        return reason
-    from fcrlive.daemon.modbus_source import ModbusParams, ModbusSource
+        return reason, None
+    from fcrlive.daemon.modbus_source import ModbusSource
+    from fcrlive.modbus.client import ModbusParams
 
     src = ModbusSource(ModbusParams.from_config(mcfg))
     async with src:
         try:
             await src.wait_connected(timeout)
         except TimeoutError:
-            return "TCP works but the Modbus client could not connect"
+            return "TCP works but the Modbus client could not connect", None
         values, why = await src._read_once(src.read_blocks[:1])
-    if values is None:
-        return f"connected, but reading the input registers failed ({why})"
-    return None
+        if values is None:
+            return f"connected, but reading the input registers failed ({why})", None
+        if rated_mw is None:
+            return None, None
+        try:
+            device_mw = await read_rated_power(src)
+        except ConnectionError as exc:
+            return f"connected, but reading {RATED_POINT} failed ({exc})", None
+    return None, rating_problem(rated_mw, device_mw)
+
+
+async def probe_modbus(mcfg, timeout: float = 3.0) -> str | None:
+    """TCP connect, then one read of the first input block with the configured unit id; None if OK."""
+    return (await _probe_modbus(mcfg, timeout, None))[0]
 
 
 async def check_peers(cfg, timeout: float = 3.0) -> list[str]:
@@ -66,9 +111,11 @@ async def check_peers(cfg, timeout: float = 3.0) -> list[str]:
     problems = []
     if cfg.source.kind == "modbus":
         m = cfg.source.modbus
-        why = await probe_modbus(m, timeout)
+        why, rating = await _probe_modbus(m, timeout, cfg.unit.rated_mw)
         if why:
             problems.append(f"cannot reach the Modbus device {m.host}:{m.port} ({why})")
+        if rating:
+            problems.append(f"unit.rated_mw: {rating}")
     if cfg.mqtt.enabled:
         why = await probe_tcp(cfg.mqtt.host, cfg.mqtt.port, timeout)
         if why:

@@ -2,14 +2,14 @@
 
 Short windows (10 min, or a window with little usable data) occasionally give a droop far from the
 truth whose 95 % interval is not finite or spans the whole plausible range; published as a headline
-number it would be read as a measurement. The rule judges the numbers exactly as they are published
-(:func:`fcrlive.daemon.payloads.headline_scalars`: ``droop`` in %, ``max_abs_s``, ``max_abs_g1``), each
-on its own, and the run takes the worst level:
+number it would be read as a measurement. The rule judges the numbers of the identification report
+exactly as they are published (:func:`fcrlive.daemon.payloads.headline_scalars`: ``droop`` in %,
+``max_abs_s``, ``max_abs_g1``), each on its own, and the run takes the worst level:
 
 ``rejected``
-    - ``droop`` is in the result but has no finite value (not identifiable);
-    - a number's 95 % interval is given but not finite (null, NaN, inf) or inverted (hi < lo), or
-      does not contain the number;
+    - ``droop`` has no finite value (not identifiable);
+    - a number's 95 % interval is unknown (null: a NaN or infinite bound) or inverted (upper < lower),
+      or does not contain the number;
     - the interval is wider than ``reject_ci_rel_width`` times |value|;
     - the droop is outside ``[droop_min_pct, droop_max_pct]`` (a governor droop is a few per cent).
 ``uncertain``
@@ -18,17 +18,20 @@ on its own, and the run takes the worst level:
 ``ok``
     otherwise.
 
-A number without any uncertainty (a plug-in that gives a bare number or ``{value}`` only) is judged on
-finiteness and the droop range alone. ``max_abs_s`` / ``max_abs_g1`` that the method cannot give
-(null: Z_u has no S) are not judged. The interval of the simple form ``{value, std}`` is
-value ± 1.96·std. Thresholds: ``[identification.result_quality]`` (docs/config.md).
+``max_abs_s`` / ``max_abs_g1`` that the method cannot give (null: Z_u has no S) or that the
+identification says this window cannot give (null with a reason, e.g. lowband's coherence gate; listed in
+``not_identifiable``) are not judged and never published as numbers. Nor are the TSO verdicts:
+``undecided`` (a margin's 95 % interval reaches over its limit) is an honest result, published on
+``tso/<product>``, not a reason to reject the run. The
+interval is the report's [lower, upper] as it is (the droop's is not symmetric). Thresholds:
+``[identification.result_quality]`` (docs/config.md).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any
 
+from fcrlive.analysis.report import IdentifyReport
 from fcrlive.daemon.config import ResultQualityConfig
 from fcrlive.daemon.payloads import (
     HEADLINE_SCALARS,
@@ -36,79 +39,65 @@ from fcrlive.daemon.payloads import (
     ResultQuality,
     ScalarPayload,
     headline_scalars,
+    not_identifiable,
 )
 
-Z95 = 1.959964
 _ORDER = {"ok": 0, "uncertain": 1, "rejected": 2}
-
-
-def _interval(raw: Any, p: ScalarPayload) -> tuple[bool, float | None, float | None]:
-    """``(given, lo, hi)`` in the published unit; lo/hi None when given but not finite."""
-    if p.ci95 is not None:
-        lo, hi = [*p.ci95, None, None][:2]
-        return True, lo, hi
-    if isinstance(raw, dict) and "std" in raw:
-        if p.std is None or p.value is None:
-            return True, None, None
-        return True, p.value - Z95 * p.std, p.value + Z95 * p.std
-    return False, None, None
 
 
 def _fmt(x: float) -> str:
     return f"{x:.4g}"
 
 
-def judge_quantity(key: str, raw: Any, p: ScalarPayload | None, rule: ResultQualityConfig) -> QuantityQuality:
-    """The verdict on one published number (``raw``: its form in the plug-in's JSON; ``p``: as published,
-    None when null)."""
+def judge_quantity(key: str, p: ScalarPayload | None, rule: ResultQualityConfig) -> QuantityQuality:
+    """The verdict on one published number (``p``: as published; None when the report has none)."""
     unit = " %" if key == "droop" else ""
     v = None if p is None else p.value
     if v is None:
-        return QuantityQuality(level="rejected", reasons=[f"{key}: no finite value (not identifiable)"])
+        why = f": {p.reason}" if p is not None and p.reason else ""
+        return QuantityQuality(level="rejected", reasons=[f"{key}: no finite value (not identifiable){why}"])
     rejected: list[str] = []
     uncertain: list[str] = []
     if key == "droop" and not rule.droop_min_pct <= v <= rule.droop_max_pct:
         rejected.append(f"droop: {_fmt(v)} % outside the plausible {_fmt(rule.droop_min_pct)}-"
                         f"{_fmt(rule.droop_max_pct)} %")
-    given, lo, hi = _interval(raw, p)
-    if given:
-        if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
-            rejected.append(f"{key}: no finite 95 % interval")
-            return QuantityQuality(level="rejected", reasons=rejected)
-        span = f"[{_fmt(lo)}, {_fmt(hi)}]{unit}"
-        tol = 1e-9 * abs(v)
-        if hi < lo:
-            rejected.append(f"{key}: 95 % interval {span} inverted")
-        elif hi == lo:  # a point estimate (e.g. a sine fit): nothing says how far to trust it
-            uncertain.append(f"{key}: 95 % interval {span} has zero width (no uncertainty estimate)")
-        elif not lo - tol <= v <= hi + tol:
-            rejected.append(f"{key}: {_fmt(v)}{unit} outside its own 95 % interval {span}")
-        else:
-            rel = (hi - lo) / abs(v) if v != 0 else math.inf
-            if rel > rule.reject_ci_rel_width:
-                rejected.append(f"{key}: 95 % interval {span} is {rel:.3g}x the value wide "
-                                f"(rejected above {_fmt(rule.reject_ci_rel_width)}x)")
-            elif rel > rule.uncertain_ci_rel_width:
-                uncertain.append(f"{key}: 95 % interval {span} is {rel:.3g}x the value wide "
-                                 f"(uncertain above {_fmt(rule.uncertain_ci_rel_width)}x)")
+    lo, hi = p.ci95
+    if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):  # unknown: never ok
+        rejected.append(f"{key}: no finite 95 % interval")
+        return QuantityQuality(level="rejected", reasons=rejected)
+    span = f"[{_fmt(lo)}, {_fmt(hi)}]{unit}"
+    tol = 1e-9 * abs(v)
+    if hi < lo:
+        rejected.append(f"{key}: 95 % interval {span} inverted")
+    elif hi == lo:  # a point estimate: nothing says how far to trust it
+        uncertain.append(f"{key}: 95 % interval {span} has zero width (no uncertainty estimate)")
+    elif not lo - tol <= v <= hi + tol:
+        rejected.append(f"{key}: {_fmt(v)}{unit} outside its own 95 % interval {span}")
+    else:
+        rel = (hi - lo) / abs(v) if v != 0 else math.inf
+        if rel > rule.reject_ci_rel_width:
+            rejected.append(f"{key}: 95 % interval {span} is {rel:.3g}x the value wide "
+                            f"(rejected above {_fmt(rule.reject_ci_rel_width)}x)")
+        elif rel > rule.uncertain_ci_rel_width:
+            uncertain.append(f"{key}: 95 % interval {span} is {rel:.3g}x the value wide "
+                             f"(uncertain above {_fmt(rule.uncertain_ci_rel_width)}x)")
     if rejected:
         return QuantityQuality(level="rejected", reasons=rejected + uncertain)
     return QuantityQuality(level="uncertain" if uncertain else "ok", reasons=uncertain)
 
 
-def judge(result: dict[str, Any] | None, rule: ResultQualityConfig | None = None) -> ResultQuality:
-    """The verdict on a plug-in's JSON (the identification report or the simple form, docs/mqtt.md):
-    each headline number judged by :func:`judge_quantity`, the run at the worst level."""
+def judge(report: IdentifyReport, rule: ResultQualityConfig | None = None) -> ResultQuality:
+    """The verdict on an identification report: each headline number judged by :func:`judge_quantity`
+    (the droop always: a report without one is rejected), the run at the worst level."""
     rule = rule or ResultQualityConfig()
-    r = result or {}
-    scalars = headline_scalars(r)
+    scalars = headline_scalars(report)
     quantities: dict[str, QuantityQuality] = {}
     for key in HEADLINE_SCALARS:
-        if key in scalars or (key == "droop" and key in r):
-            quantities[key] = judge_quantity(key, r[key], scalars.get(key), rule)
+        if key in scalars or key == "droop":
+            quantities[key] = judge_quantity(key, scalars.get(key), rule)
     level = max((q.level for q in quantities.values()), key=_ORDER.__getitem__, default="ok")
     return ResultQuality(level=level, reasons=[x for q in quantities.values() for x in q.reasons],
-                         quantities=quantities)
+                         quantities=quantities, not_identifiable=not_identifiable(report))
 
 
 def failed(error: str) -> ResultQuality:

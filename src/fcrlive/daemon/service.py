@@ -6,9 +6,9 @@ asyncio layer only moves data and schedules work:
 * sampler: every sample goes to the store writer queue, the metrics and the live statistics;
 * every ``stats_interval_s``: ``live`` statistics to MQTT, gauges refreshed;
 * every ``every_min``: the last ``window_min`` of samples is read back (in a thread), judged for
-  data quality, identified in the worker process, judged by the result-quality rule
-  (:mod:`fcrlive.daemon.result_quality`), stored as JSON and published (retained; a rejected result
-  only on ``result/latest`` and ``result_quality``);
+  data quality, identified in the worker process (an :class:`~fcrlive.analysis.report.IdentifyReport`),
+  judged by the result-quality rule (:mod:`fcrlive.daemon.result_quality`), stored as JSON and published
+  (retained; a rejected result only on ``result/latest`` and ``result_quality``);
 * systemd: READY=1 once running, WATCHDOG=1 only while samples keep flowing (a stuck sampler lets
   systemd restart us), STOPPING=1 on the way out.
 
@@ -48,12 +48,37 @@ log = logging.getLogger("fcrlive.service")
 def make_source(cfg: FcrliveConfig):
     """The configured source object (an async context manager with ``samples()`` and ``stats``)."""
     if cfg.source.kind == "modbus":
-        from fcrlive.daemon.modbus_source import ModbusParams, ModbusSource
+        from fcrlive.daemon.modbus_source import ModbusSource
+        from fcrlive.modbus.client import ModbusParams
 
+        if buffered(cfg):  # every controller sample from the governor's ring buffer
+            from fcrlive.daemon.buffered_source import BufferedModbusSource
+
+            return BufferedModbusSource(ModbusParams.from_config(cfg.source.modbus))
         return ModbusSource(ModbusParams.from_config(cfg.source.modbus))
     from fcrlive.daemon.can_source import CanParams, CanSource
 
-    return CanSource(CanParams.from_config(cfg.source.can))
+    c = cfg.source.can
+    if c.acquisition == "per_sample":  # every controller sample: one CAN FD frame each
+        from fcrlive.daemon.can_sample_source import CanSampleSource
+
+        return CanSampleSource(c.interface, c.channel, c.dbc, c.controller_tc_s, c.bitrate)
+    return CanSource(CanParams.from_config(c))
+
+
+def buffered(cfg: FcrliveConfig) -> bool:
+    """True when every controller sample is acquired: the register map says ``acquisition = "buffered"``,
+    or CAN ``acquisition = "per_sample"`` (docs/buffered-acquisition.md)."""
+    if cfg.source.kind == "can":
+        return cfg.source.can.acquisition == "per_sample"
+    return cfg.source.modbus.load_map().acquisition == "buffered"
+
+
+def samples_retention_hours(cfg: FcrliveConfig) -> float:
+    """How long samples are kept [h]: buffered controller-rate data only for the identification windows."""
+    if not buffered(cfg):
+        return cfg.store.retention_hours
+    return cfg.store.controller_rate_hours or max(1.0, 2.0 * cfg.identification.window_min / 60.0)
 
 
 def poll_hz(cfg: FcrliveConfig) -> float:
@@ -87,6 +112,8 @@ class Service:
         self.excitation: Any = None
         self.written_hz = 0.0
         """The excitation value last written to the device [Hz] (NaN when a write failed)."""
+        self.oplog: Any = None
+        """The operation log writer (``[store] oplog_enabled``; fcrlive.daemon.oplog)."""
 
     # -- tasks ------------------------------------------------------------------------------------
 
@@ -95,11 +122,14 @@ class Service:
 
         from fcrlive.daemon.config import WRITTEN_SIGNAL
 
-        with_r = self.excitation is not None
+        # buffered: every slot carries the r the governor applied to that very sample
+        with_r = self.excitation is not None and not buffered(self.cfg)
         async for s in self.source.samples():
             if with_r:  # the r actually written, stored with the sample it was in force for
                 s = replace(s, values={**s.values, WRITTEN_SIGNAL: self.written_hz})
             self.writer.add(s)
+            if self.oplog is not None:
+                self.oplog.add(s)
             self.metrics.observe_sample(s)
             live.add(s)
             if s.quality != Quality.MISSING:
@@ -152,6 +182,27 @@ class Service:
                         m.backoff_max_s)
         await asyncio.Event().wait()  # stays in the task list without ending it
 
+    async def _check_rating(self) -> None:
+        """Once the device answers: its ``rated_power`` register against ``[unit] rated_mw``; a mismatch
+        stops the daemon (ConfigError), as a wrong rating scales every published droop."""
+        from fcrlive.daemon.reach import RATED_POINT, rating_problem, read_rated_power
+        from fcrlive.errors import ConfigError
+
+        while True:
+            await self.source.wait_connected()
+            try:
+                device_mw = await read_rated_power(self.source)
+                break
+            except ConnectionError:
+                await asyncio.sleep(1.0)
+        problem = rating_problem(self.cfg.unit.rated_mw, device_mw)
+        if problem is not None:
+            raise ConfigError(problem, where="unit.rated_mw")
+        if device_mw is not None:
+            log.info("rated power checked: unit.rated_mw %g MW, device %s %g MW", self.cfg.unit.rated_mw,
+                     RATED_POINT, device_mw)
+        await asyncio.Event().wait()
+
     async def _watchdog(self, interval: float) -> None:
         while True:
             await asyncio.sleep(interval)
@@ -165,7 +216,12 @@ class Service:
         t2 = time.time()
         t1 = t2 - ic.window_min * 60.0
         w = await asyncio.to_thread(self._read, t1, t2)
-        expected = round((t2 - t1) * poll_hz(self.cfg))
+        if buffered(self.cfg):
+            from fcrlive.daemon.buffered_source import expected_samples
+
+            expected = expected_samples(w, t1, t2)
+        else:
+            expected = round((t2 - t1) * poll_hz(self.cfg))
         quality = window_quality(w, expected)
         result, error, dt = None, None, 0.0
         if quality.ok_fraction < ic.min_ok_fraction:
@@ -187,16 +243,17 @@ class Service:
             dt = time.monotonic() - t0
             self.metrics.ident_duration.observe(dt)
         t = time.time()
-        verdict = failed(error) if error is not None else judge(result, ic.result_quality)
+        verdict = judge(result, ic.result_quality) if result is not None else failed(error)
         payload = ResultPayload(unit=self.cfg.unit.name, t=t, t_iso=iso(t), window=Window.of(t1, t2),
                                 method=ic.method, ok=error is None, error=error, duration_s=dt,
                                 quality=quality, result=result, result_quality=verdict)
         self.writer.add_result(ResultRow(t=t, t1=t1, t2=t2, method=ic.method,
                                          ok_fraction=quality.ok_fraction, quality=quality.model_dump(),
-                                         result=result, duration_s=dt, error=error,
+                                         result=None if result is None else result.to_json_dict(),
+                                         duration_s=dt, error=error,
                                          result_quality=verdict.model_dump()))
+        self.metrics.result_levels.labels(verdict.level).inc()  # a skipped or failed run is rejected too
         if result is not None:
-            self.metrics.result_levels.labels(verdict.level).inc()
             if verdict.level != "rejected":
                 self.metrics.result_published(t)
             self.results += 1
@@ -240,6 +297,8 @@ class Service:
         from fcrlive.errors import ConfigError
 
         cfg = self.cfg
+        for w in cfg.warnings:
+            log.warning("configuration: %s", w)
         if cfg.metrics.enabled:
             try:
                 self.metrics.serve(cfg.metrics.host, cfg.metrics.port)
@@ -247,13 +306,19 @@ class Service:
                 raise ConfigError(f"cannot listen on {cfg.metrics.host}:{cfg.metrics.port} "
                                   f"({(exc.strerror or str(exc)).lower()})", where="metrics") from None
         self.writer = SampleWriter(cfg.store.path, self.signals, cfg.store.commit_interval_s,
-                                   cfg.store.retention_hours, version=self.version,
+                                   samples_retention_hours(cfg), version=self.version,
                                    info={"unit": cfg.unit.name, "source": cfg.source.kind,
                                          "poll_hz": poll_hz(cfg), "signals": list(self.signals)})
         try:
             await asyncio.to_thread(self.writer.open)
         except (OSError, sqlite3.Error) as exc:
             raise ConfigError(f"cannot open the store {cfg.store.path} ({exc})", where="store.path") from None
+        if cfg.store.oplog_enabled:
+            from fcrlive.daemon.oplog import OplogWriter
+
+            st = cfg.store
+            self.oplog = OplogWriter(st.path, st.oplog_interval_s, st.oplog_retention_days)
+            await asyncio.to_thread(self.oplog.open)
         live = LiveStats(time.time(), self.signals)
         async with contextlib.AsyncExitStack() as stack:
             if cfg.mqtt.enabled:
@@ -264,7 +329,7 @@ class Service:
                     MqttPublisher(cfg.mqtt, cfg.unit.name, live_signals=live_signals))
             self.source = await stack.enter_async_context(make_source(cfg))
             if cfg.excitation.enabled:
-                from fcrlive.daemon.modbus_source import ModbusParams
+                from fcrlive.modbus.client import ModbusParams
 
                 # entered after the source: left before it, with a verified zero written on the way out
                 task = cfg.excitation.make_task(ModbusParams.from_config(cfg.source.modbus), f0=cfg.unit.f0,
@@ -290,6 +355,7 @@ class Service:
                      len(self.signals), cfg.store.path)
             if cfg.source.kind == "modbus":
                 tasks.append(asyncio.create_task(self._report_unreachable(), name="reach"))
+                tasks.append(asyncio.create_task(self._check_rating(), name="rating"))
             stopper = asyncio.create_task(stop.wait())
             done, _ = await asyncio.wait([stopper, *tasks], return_when=asyncio.FIRST_COMPLETED)
             sd_notify("STOPPING=1")
@@ -297,8 +363,13 @@ class Service:
                 t.cancel()
             await asyncio.gather(stopper, *tasks, return_exceptions=True)
             await asyncio.to_thread(self.writer.close)
+            if self.oplog is not None:
+                await asyncio.to_thread(self.oplog.close)
             failed = [t for t in done if t is not stopper and not t.cancelled() and t.exception()]
             for t in failed:
+                if isinstance(t.exception(), ConfigError):  # the user's to fix: one line, no traceback
+                    log.error("stopping: %s", t.exception())
+                    continue
                 log.error("task %s failed: %r", t.get_name(), t.exception(), exc_info=t.exception())
             log.info("stopped committed=%d", self.writer.committed)
             # leaving the stack: worker, source, then the publisher says "offline"

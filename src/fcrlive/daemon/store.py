@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from fcrlive.daemon.sample import Quality, Sample
+from fcrlive.signals import GAP_FACTOR
 
 log = logging.getLogger("fcrlive.store")
 
@@ -54,7 +55,9 @@ def connect(path: str | Path, readonly: bool = False) -> sqlite3.Connection:
     if readonly:
         con = sqlite3.connect(f"file:{Path(path)}?mode=ro", uri=True, timeout=10, check_same_thread=False)
     else:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        from fcrlive.daemon.storefile import prepare  # 0600; no mkdir -p outside the state directory
+
+        prepare(path)
         con = sqlite3.connect(str(path), timeout=10, check_same_thread=False)
         con.execute("PRAGMA journal_mode=WAL")
         con.execute("PRAGMA synchronous=NORMAL")
@@ -162,13 +165,13 @@ class Window:
     def gaps(self, max_dt: float | None = None) -> list[tuple[float, float]]:
         """Intervals ``(start, end)`` [UNIX s] without :attr:`covered` samples.
 
-        A gap is a run of non-OK samples, or a jump in ``t`` longer than ``max_dt`` (default 1.5×
-        the median period) where no rows were stored at all (daemon down). Also covers a missing
-        start or end of the window.
+        A gap is a run of non-OK samples, or a jump in ``t`` longer than ``max_dt`` (default the gap
+        rule of :mod:`fcrlive.signals`: ``GAP_FACTOR`` (1.5) × the median period) where no rows were
+        stored at all (daemon down). Also covers a missing start or end of the window.
         """
         if self.t.size == 0:
             return [(self.t1, self.t2)]
-        max_dt = 1.5 * self.period_s if max_dt is None and self.t.size > 1 else (max_dt or math.inf)
+        max_dt = GAP_FACTOR * self.period_s if max_dt is None and self.t.size > 1 else (max_dt or math.inf)
         gaps: list[tuple[float, float]] = []
         ok = self.covered
         last_ok_t = self.t1

@@ -6,18 +6,19 @@ OpenBLAS on 2 cores made a least-squares fit 35× slower, libraries.md) and pre-
 
 Plug-in contract (``[identification] function = "module:function"``)::
 
-    def identify_window(signals, rated_mw, f0, plant=None, method="auto", kd=0.0, **params) -> result
+    def identify_window(signals, rated_mw, f0, plant=None, method="auto", kd=0.0, **params) -> IdentifyReport
 
 ``signals`` is a dict of 1-D float64 numpy arrays of equal length: ``t`` [UNIX s], ``ok`` (1.0 for
 quality-OK samples, else 0.0) and one array per stored signal in its unit (``power`` [MW],
 ``grid_freq`` [Hz], ``excitation_applied`` [Hz], ...; NaN where unavailable). ``plant`` is the path of
 the plant description file or None, ``kd`` the load damping of ``[unit]``; a plug-in should accept
 (and may ignore) further keyword parameters. The default plug-in is
-:func:`fcrlive.daemon.identify_plugin.identify_window`. The result may be an object with
-``to_json()`` (returning a dict or a JSON string), a dict, or a JSON string; the worker returns it
-as a dict, which the service judges by the result-quality rule (:mod:`fcrlive.daemon.result_quality`:
-the keys ``droop``, ``max_abs_s``, ``max_abs_g1`` in the forms of docs/mqtt.md), stores in SQLite and
-publishes on MQTT.
+:func:`fcrlive.daemon.identify_plugin.identify_window`. The result is an
+:class:`fcrlive.analysis.report.IdentifyReport` (anything else is a TypeError in the worker). It crosses
+the process boundary as the model's JSON (``model_dump_json``, validated back by
+``model_validate_json``: a report that would not survive the store or MQTT fails here), and the
+service gets the typed report: it judges it by the result-quality rule
+(:mod:`fcrlive.daemon.result_quality`), stores it in SQLite and publishes it on MQTT.
 """
 
 from __future__ import annotations
@@ -25,14 +26,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import importlib
-import json
 import os
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
-from typing import Any
 
 import numpy as np
+
+from fcrlive.analysis.report import IdentifyReport
 
 _BLAS_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -57,33 +58,15 @@ def _init_worker(func_path: str | None) -> None:
             resolve(func_path)
 
 
-def _to_dict(result: Any) -> dict:
-    if hasattr(result, "to_json"):
-        result = result.to_json()
-    if isinstance(result, str | bytes):
-        result = json.loads(result)
-    if not isinstance(result, dict):
-        raise TypeError(f"identification returned {type(result).__name__}, expected a dict or to_json()")
-    # round-trip through JSON now: a non-serialisable result must fail here, not in the store
-    return json.loads(json.dumps(result, default=_json_default))
-
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    raise TypeError(f"{type(o).__name__} is not JSON serialisable")
-
-
 def run_job(func: str | Callable, signals: dict[str, np.ndarray], rated_mw: float, f0: float,
-            plant: str | None, method: str, params: dict | None = None) -> tuple[dict, float]:
-    """Executed in the worker: call the plug-in, return ``(result dict, CPU wall time [s])``."""
+            plant: str | None, method: str, params: dict | None = None) -> tuple[str, float]:
+    """Executed in the worker: call the plug-in, return ``(the report's JSON, CPU wall time [s])``."""
     fn = resolve(func) if isinstance(func, str) else func
     t0 = time.perf_counter()
-    res = fn(signals, rated_mw, f0, plant=plant, method=method, **(params or {}))
-    out = _to_dict(res)
-    return out, time.perf_counter() - t0
+    rep = fn(signals, rated_mw, f0, plant=plant, method=method, **(params or {}))
+    if not isinstance(rep, IdentifyReport):
+        raise TypeError(f"identification returned {type(rep).__name__}, expected an IdentifyReport")
+    return rep.model_dump_json(), time.perf_counter() - t0
 
 
 class IdentificationWorker:
@@ -119,20 +102,21 @@ class IdentificationWorker:
             self._pool = None
 
     async def run(self, signals: dict[str, np.ndarray], rated_mw: float, f0: float,
-                  plant: str | None = None, method: str = "auto", **params) -> tuple[dict, float]:
-        """Run one identification; ``(result dict, duration [s])``. Exceptions of the plug-in propagate.
+                  plant: str | None = None, method: str = "auto", **params) -> tuple[IdentifyReport, float]:
+        """Run one identification; ``(report, duration [s])``. Exceptions of the plug-in propagate.
         ``params`` (e.g. ``kd``) are passed to the plug-in as keyword arguments."""
         loop = asyncio.get_running_loop()
         fut = loop.run_in_executor(self._pool, run_job, self.func, signals, rated_mw, f0, plant, method,
                                    params)
         try:
-            return await asyncio.wait_for(fut, self.timeout_s)
+            text, dt = await asyncio.wait_for(fut, self.timeout_s)
         except TimeoutError:
             old, self._pool = self._pool, self._new_pool()
             procs = _processes(old)
             old.shutdown(wait=False, cancel_futures=True)
             _terminate(procs)
             raise
+        return IdentifyReport.model_validate_json(text), dt
 
 
 def _processes(pool: ProcessPoolExecutor) -> list:

@@ -6,6 +6,12 @@ importing it never pulls in a Modbus stack. The writing path lives in its own mo
 :mod:`fcrlive.excitation.task` (ExcitationTask: generator → guard → writer, zero on every way out) and
 :mod:`fcrlive.excitation.config` (ExcitationSettings: off unless enabled). Every value written to a
 governor must come from :meth:`SafetyGuard.step` (docs/excitation-safety.md, docs/excitation-writer.md).
+
+Layering: the generators and the guard are part of the pure core (with ``ident``: no asyncio, no I/O); the
+writer and the task sit above :mod:`fcrlive.modbus` and receive what they need (``ModbusParams`` with the
+register map, a writer) instead of importing the daemon; the command-line driver
+(``python -m fcrlive.excitation``) is :mod:`fcrlive.commands._excitation`. pyproject.toml's import contracts
+enforce this.
 """
 
 from fcrlive.excitation.generators import (

@@ -3,10 +3,11 @@
 The daemon's configuration embeds :class:`ExcitationSettings` as its ``excitation`` section::
 
     [excitation]
-    enabled = true               # the only switch that opens a write path to the governor
+    enabled = true               # the only switch that opens a write path to the governor: the TOML
+                                 # boolean only ("yes", 1 are errors); the environment may only disable
     period_s = 0.1               # write period = sample time of r[n] [s]
-    [excitation.limits]          # fcrlive.excitation.guard.GuardLimits, validated against the safe maxima
-    amplitude_hz = 0.1
+    [excitation.limits]          # fcrlive.excitation.guard.GuardLimits, validated against the safe maxima;
+    amplitude_hz = 0.1           # required with enabled = true (at least amplitude_hz)
     holdoff_s = 30.0
     [excitation.generator]
     kind = "white"               # white (paper), prbs, multisine, sine
@@ -87,17 +88,52 @@ PointSettings = create_model(
 )
 
 
+class FromEnvironment(str):
+    """A value of ``[excitation] enabled`` that came from the environment (the daemon's configuration
+    loader marks it so): the environment may turn writing off, never on (docs/excitation-safety.md)."""
+
+
+FALSE_WORDS = frozenset({"false", "0", "no", "off", "n", "f", ""})
+"""Environment values that disable writing (``FCRLIVE_EXCITATION__ENABLED=false``)."""
+
+
+def strict_enabled(v: Any) -> bool:
+    """``enabled`` as the one switch that opens a write path: the TOML boolean only.
+
+    pydantic's lax booleans would take ``"yes"``, ``"on"``, ``"1"`` or ``1`` for true; a typo or a
+    stray string must not start writing to a governor. A value from the environment
+    (:class:`FromEnvironment`) may only disable.
+    """
+    if isinstance(v, FromEnvironment):
+        if v.strip().lower() in FALSE_WORDS:
+            return False
+        raise ValueError(f"the environment may only disable writing (got {str(v)!r}); writing is enabled "
+                         "only by `enabled = true` in the configuration file")
+    if type(v) is bool:
+        return v
+    raise ValueError(f"must be the TOML boolean true or false, not {v!r}: only `enabled = true` (no "
+                     "quotes, no number) enables writing to the governor")
+
+
 class ExcitationSettings(_Section):
     """Safe excitation (docs/excitation-safety.md, docs/excitation-writer.md)."""
 
-    enabled: bool = Field(False, description="write r[n] to the governor; off unless set explicitly")
+    enabled: bool = Field(False, description="write r[n] to the governor: only the TOML boolean `true` "
+                          "enables (not \"yes\", 1, ...; the environment may only disable)")
     period_s: float = Field(0.1, ge=0.02, le=1.0, description="write period = sample time of r[n] [s]")
-    limits: dict[str, float] = Field(default_factory=dict, description="GuardLimits fields")
+    limits: dict[str, float] = Field(
+        default_factory=dict, description="GuardLimits fields (docs/excitation-safety.md); required with "
+        "enabled = true, at least amplitude_hz; each checked against its hard safe range, also when disabled")
     generator: GeneratorSettings = GeneratorSettings()
     points: PointSettings = PointSettings()
     verify_applied_ticks: int = Field(
         5, ge=0, le=100, description="fresh reads in a row with a different applied value → fault; 0 off")
     exit_verify_s: float = Field(1.0, ge=0, le=10, description="wait this long for applied = 0 on exit [s]")
+
+    @field_validator("enabled", mode="before")
+    @classmethod
+    def _enabled(cls, v: Any) -> bool:
+        return strict_enabled(v)
 
     @field_validator("limits")
     @classmethod
@@ -112,6 +148,10 @@ class ExcitationSettings(_Section):
 
     @model_validator(mode="after")
     def _check(self) -> ExcitationSettings:
+        if self.enabled and "amplitude_hz" not in self.limits:
+            raise ValueError("enabled = true needs an explicit [excitation.limits] table with at least "
+                             "amplitude_hz (the largest |r| to write, ≤ 0.1 Hz): a write path runs on "
+                             "limits someone chose, not on defaults")
         lim = self.guard_limits()
         amp = self.generator.amplitude_hz
         if amp is not None and amp > lim.amplitude_hz:
@@ -142,7 +182,7 @@ class ExcitationSettings(_Section):
                                "sample_time_s": self.period_s, "params": dict(g.params), "f0_hz": f0})
 
     def make_writer(self, params):
-        """An ExcitationWriter on ``params`` (the daemon's ``ModbusParams``)."""
+        """An ExcitationWriter on ``params`` (a :class:`fcrlive.modbus.client.ModbusParams`)."""
         from fcrlive.excitation.writer import ExcitationWriter
 
         return ExcitationWriter(params, max_abs_hz=self.guard_limits().amplitude_hz,

@@ -116,6 +116,34 @@ def _real(value: Any) -> float | None:
         return None
 
 
+def _fcrd_reasons(fcrd_active: bool | None) -> set[str]:
+    """FCR-D activated, or unknown (None, or an object that cannot say whether it is true)."""
+    if fcrd_active is None:
+        return {FCRD_UNKNOWN}
+    try:
+        return {FCRD_ACTIVE} if bool(fcrd_active) else set()
+    except Exception:  # an object that cannot say whether it is true: unknown
+        return {FCRD_UNKNOWN}
+
+
+def _status_reasons(status_word: int | None) -> set[str]:
+    """The device status word's permissives: known, a valid word, FCR-N active, normal operation."""
+    if status_word is None:
+        return {STATUS_UNKNOWN}
+    try:
+        sw = operator.index(status_word)
+    except TypeError:
+        sw = -1
+    if isinstance(status_word, bool) or not (0 <= sw <= STATUS_WORD_MAX):
+        return {STATUS_INVALID}
+    reasons = set()
+    if not sw & STATUS_BIT_FCRN_ACTIVE:
+        reasons.add(FCRN_INACTIVE)
+    if not sw & STATUS_BIT_NORMAL_OPERATION:
+        reasons.add(ABNORMAL_OPERATION)
+    return reasons
+
+
 @dataclass(frozen=True)
 class GuardLimits:
     """Limits of the safety guard; validated against the hard safe limits of this module.
@@ -367,12 +395,40 @@ class SafetyGuard:
         keeps being used until it is older than ``stale_after_s``). ``measured_at_s``: when it was measured,
         on the same clock as ``now_s`` (default: now). ``status_word``: the device status word (bit 0 FCR-N
         active, bit 1 normal operation; None = unknown). ``fcrd_active``: FCR-D activated (None = unknown).
-        """
-        lim = self.limits
-        reasons: set[str] = set()
 
-        # Time: the guard runs on its own monotonic time τ, advanced only by valid forward steps, so a bad
-        # clock can never open a hold-off or age the budget early.
+        The phases, in order (each adds the reasons it finds): time, measurement, permissives, request,
+        hold-off, budget, stop; then the value, and the decision is recorded.
+        """
+        reasons: set[str] = set()
+        now, dt = self._advance_time(now_s, reasons)
+        self._take_measurement(grid_freq_hz, measured_at_s, now, reasons)
+        self._check_frequency(reasons)
+        reasons |= _fcrd_reasons(fcrd_active) | _status_reasons(status_word)
+        requested, target, clamped = self._clamp_request(requested_hz, reasons)
+        hard = self._check_holdoff(reasons)
+        self._check_budget(reasons)
+        if self._stop_requested:
+            reasons.add(STOPPING)
+        value, rate_limited = self._next_value(target, dt, hard, reasons)
+        self._update_stopped(value, reasons)
+
+        inhibited = hard or bool(reasons & {HOLDOFF, BUDGET_EXHAUSTED})
+        active = not inhibited and not self._stop_requested
+        decision = GuardDecision(
+            t_s=self._tau, dt_s=dt, value_hz=value, requested_hz=requested, active=active,
+            inhibited=inhibited, reasons=tuple(sorted(reasons)), clamped=clamped and active,
+            rate_limited=rate_limited)
+        self._record(decision)
+        return decision
+
+    # ---- the phases of a step (each one idea; ``reasons`` collects what they find) -------------------------
+
+    def _advance_time(self, now_s: float, reasons: set[str]) -> tuple[float | None, float]:
+        """(now as a real number or None, dt credited) after advancing τ and booking the interval just ended.
+
+        The guard runs on its own monotonic time τ, advanced only by valid forward steps, so a bad clock can
+        never open a hold-off or age the budget early.
+        """
         now = _real(now_s)
         dt = 0.0
         if now is None or not math.isfinite(now):
@@ -386,7 +442,7 @@ class SafetyGuard:
                 if not math.isfinite(dt) or not math.isfinite(self._tau + dt):
                     reasons.add(INVALID_TIME)
                     dt = 0.0
-                elif dt > lim.stale_after_s:
+                elif dt > self.limits.stale_after_s:
                     reasons.add(STEP_GAP)  # nobody called us: the writer loop stalled
                     # Credit at most one budget window: enough to expire the whole ledger, and it keeps τ
                     # small enough that later steps of milliseconds still advance it (1e300 + 0.1 == 1e300).
@@ -395,8 +451,11 @@ class SafetyGuard:
                 self._last_now = now
         self._tau += dt
         self._account(dt)
+        return now, dt
 
-        # Measurements.
+    def _take_measurement(self, grid_freq_hz: float | None, measured_at_s: float | None, now: float | None,
+                          reasons: set[str]) -> None:
+        """Keep a new valid grid frequency and when it was fresh (on τ); flag invalid or stale ones."""
         if grid_freq_hz is not None:
             f = _real(grid_freq_hz)
             age = 0.0
@@ -411,8 +470,12 @@ class SafetyGuard:
             else:
                 self._last_freq = f
                 self._last_fresh = self._tau - age
-        if self._last_fresh is None or self._tau - self._last_fresh > lim.stale_after_s:
+        if self._last_fresh is None or self._tau - self._last_fresh > self.limits.stale_after_s:
             reasons.add(STALE_MEASUREMENT)
+
+    def _check_frequency(self, reasons: set[str]) -> None:
+        """The band interlock with hysteresis on the last grid frequency."""
+        lim = self.limits
         if self._last_freq is not None:
             dev = abs(self._last_freq - self.f0)
             if self._in_band and dev > lim.band_hz:
@@ -422,31 +485,9 @@ class SafetyGuard:
             if not self._in_band:
                 reasons.add(FREQUENCY_OUT_OF_BAND)
 
-        # Permissives.
-        if fcrd_active is None:
-            reasons.add(FCRD_UNKNOWN)
-        else:
-            try:
-                if bool(fcrd_active):
-                    reasons.add(FCRD_ACTIVE)
-            except Exception:  # an object that cannot say whether it is true: unknown
-                reasons.add(FCRD_UNKNOWN)
-        if status_word is None:
-            reasons.add(STATUS_UNKNOWN)
-        else:
-            try:
-                sw = operator.index(status_word)
-            except TypeError:
-                sw = -1
-            if isinstance(status_word, bool) or not (0 <= sw <= STATUS_WORD_MAX):
-                reasons.add(STATUS_INVALID)
-            else:
-                if not sw & STATUS_BIT_FCRN_ACTIVE:
-                    reasons.add(FCRN_INACTIVE)
-                if not sw & STATUS_BIT_NORMAL_OPERATION:
-                    reasons.add(ABNORMAL_OPERATION)
-
-        # The request.
+    def _clamp_request(self, requested_hz: float, reasons: set[str]) -> tuple[float, float, bool]:
+        """(the request as recorded, the target within ±amplitude, whether it was clamped)."""
+        lim = self.limits
         req = _real(requested_hz)
         requested = req if req is not None else math.nan
         target = 0.0
@@ -456,17 +497,23 @@ class SafetyGuard:
         else:
             clamped = abs(req) > lim.amplitude_hz
             target = min(max(req, -lim.amplitude_hz), lim.amplitude_hz)
+        return requested, target, clamped
 
-        # Hold-off: every hard reason restarts it; healthy time counts from the first healthy step.
+    def _check_holdoff(self, reasons: set[str]) -> bool:
+        """Whether a hard reason is present. Every hard reason restarts the hold-off; healthy time counts
+        from the first healthy step."""
         hard = bool(reasons & HARD_REASONS)
         if hard:
             self._healthy_since = None
         elif self._healthy_since is None:
             self._healthy_since = self._tau
-        if not hard and self._tau - self._healthy_since < lim.holdoff_s:
+        if not hard and self._tau - self._healthy_since < self.limits.holdoff_s:
             reasons.add(HOLDOFF)
+        return hard
 
-        # Budget: stop early enough that the ramp down also fits in the budget.
+    def _check_budget(self, reasons: set[str]) -> None:
+        """Budget with hysteresis: stop early enough that the ramp down also fits in the budget."""
+        lim = self.limits
         remaining = lim.budget_s_per_day - self.budget_used_s()
         if not self._budget_exhausted and remaining <= lim.stop_time_bound_s:
             self._budget_exhausted = True
@@ -476,10 +523,10 @@ class SafetyGuard:
         if self._budget_exhausted:
             reasons.add(BUDGET_EXHAUSTED)
 
-        if self._stop_requested:
-            reasons.add(STOPPING)
-
-        # The value.
+    def _next_value(self, target: float, dt: float, hard: bool, reasons: set[str]) -> tuple[float, bool]:
+        """(the value to write, whether the rate limit held it back): exactly 0.0 under a hard reason or the
+        hold-off, a ramp to 0.0 under a soft one, else towards ``target`` at the rate limit."""
+        lim = self.limits
         prev = self._value
         rate_limited = False
         if hard or HOLDOFF in reasons:
@@ -498,28 +545,26 @@ class SafetyGuard:
         if not math.isfinite(value):  # cannot happen; the last line of defence costs nothing
             value = 0.0
         self._value = value
+        return value, rate_limited
 
+    def _update_stopped(self, value: float, reasons: set[str]) -> None:
+        """A requested stop is complete once the value is exactly 0.0; then STOPPED replaces STOPPING."""
         if self._stop_requested and value == 0.0:
             self._stopped = True
         if self._stopped:
             reasons.discard(STOPPING)
             reasons.add(STOPPED)
 
-        inhibited = hard or bool(reasons & {HOLDOFF, BUDGET_EXHAUSTED})
-        active = not inhibited and not self._stop_requested
-        decision = GuardDecision(
-            t_s=self._tau, dt_s=dt, value_hz=value, requested_hz=requested, active=active,
-            inhibited=inhibited, reasons=tuple(sorted(reasons)), clamped=clamped and active,
-            rate_limited=rate_limited)
-
+    def _record(self, decision: GuardDecision) -> None:
+        """Count the step, its newly present reasons (trips), clamping and rate limiting."""
         prev_reasons = set(self._prev.reasons) if self._prev is not None else set()
-        for r in reasons - prev_reasons:
-            self._c_trips[r] = self._c_trips.get(r, 0) + 1
+        for r in decision.reasons:  # sorted: new reasons enter the trip counts in a reproducible order
+            if r not in prev_reasons:
+                self._c_trips[r] = self._c_trips.get(r, 0) + 1
         self._c_steps += 1
         self._c_clamped += decision.clamped
-        self._c_rate_limited += rate_limited
+        self._c_rate_limited += decision.rate_limited
         self._prev = decision
-        return decision
 
     def _account(self, dt: float) -> None:
         """Book the interval just ended (length dt [s]) to the decision that was in force during it."""

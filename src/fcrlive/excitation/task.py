@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import math
 import time
@@ -421,77 +420,3 @@ class ExcitationTask:
             "generator": self.description,
         }
 
-
-# ---- a small command-line driver (SIGTERM tests, demos): python -m fcrlive.excitation ----------------------
-
-def _parser():
-    import argparse
-
-    p = argparse.ArgumentParser(prog="python -m fcrlive.excitation",
-                                description="Drive the excitation of a Modbus governor until SIGTERM/SIGINT "
-                                            "(test and demo tool; the daemon embeds ExcitationTask).")
-    p.add_argument("--host", default="127.0.0.1")
-    p.add_argument("--port", type=int, required=True)
-    p.add_argument("--register-map", default=None,
-                   help="register map TOML (default: the simulated governor's)")
-    p.add_argument("--kind", default="white", choices=("white", "prbs", "multisine", "sine"))
-    p.add_argument("--amplitude-hz", type=float, default=0.1)
-    p.add_argument("--period-s", type=float, default=0.1, help="tick = generator sample time [s]")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--holdoff-s", type=float, default=30.0)
-    p.add_argument("--rate-limit", type=float, default=1.0, help="Hz/s")
-    p.add_argument("--seconds", type=float, default=None, help="stop by itself after this long")
-    p.add_argument("--clock-scale", type=float, default=1.0,
-                   help="guard clock = scale·monotonic (the simulated governor's --speed)")
-    p.add_argument("--log-level", default="WARNING")
-    return p
-
-
-async def _amain(args) -> int:
-    import os
-    import signal
-
-    from fcrlive.daemon.config import load_register_map
-    from fcrlive.daemon.modbus_source import ModbusParams
-    from fcrlive.excitation.generators import make_generator
-    from fcrlive.excitation.guard import GuardLimits
-
-    if args.register_map is None:
-        from sim_device.registers import DEFAULT_MAP_PATH
-
-        args.register_map = DEFAULT_MAP_PATH
-    from pathlib import Path
-
-    rmap = load_register_map(Path(args.register_map))
-    limits = GuardLimits(amplitude_hz=args.amplitude_hz, rate_limit_hz_per_s=args.rate_limit,
-                         holdoff_s=args.holdoff_s)
-    gen = make_generator({"kind": args.kind, "seed": args.seed, "amplitude_hz": args.amplitude_hz,
-                          "sample_time_s": args.period_s})
-    params = ModbusParams(args.host, args.port, rmap, timeout_s=0.2, backoff_max_s=1.0)
-    writer = ExcitationWriter(params, max_abs_hz=args.amplitude_hz, write_period_s=args.period_s)
-    scale = args.clock_scale
-
-    def say(kind: str, **data: Any) -> None:
-        print(json.dumps({"event": kind, **data}), flush=True)
-
-    task = ExcitationTask(writer, SafetyGuard(limits), gen, period_s=args.period_s,
-                          clock=(lambda: scale * time.monotonic()) if scale != 1.0 else time.monotonic,
-                          on_event=lambda e: say("state", **e.to_dict()))
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        loop.add_signal_handler(
-            sig, lambda s=sig: (say("signal", signal=signal.Signals(s).name), task.stop()))
-    async with task:
-        say("armed", pid=os.getpid())
-        if args.seconds is not None:
-            loop.call_later(args.seconds, task.stop)
-        await task.run()
-    say("exit", reason=task.stats.exit_reason, zero_written=task.stats.exit_zero_ok,
-        device_applies_zero=task.stats.exit_applied_zero, max_abs_written_hz=task.stats.max_abs_written_hz)
-    return 0 if task.stats.exit_zero_ok else 1
-
-
-def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
-    logging.basicConfig(level=args.log_level, format="%(asctime)s %(levelname)s %(name)s %(message)s")
-    return asyncio.run(_amain(args))

@@ -24,12 +24,13 @@ Link errors (timeouts, refused connections, exception responses) never raise fro
 backoff, so the caller (the task) keeps its loop, feeds "status unknown" to the guard and the hold-off
 starts again.
 
-It owns its own pymodbus client instead of sharing ``fcrlive.daemon.modbus_source.ModbusSource``:
-``ModbusSource.write`` writes one point per request (no offset+enable+heartbeat FC16), reconnects in a
-background task without telling anyone (so "the first write after a reconnect is zero" could not be
-enforced from outside), and its 20-50 Hz poller's watchdog may recreate the client in the middle of a
-write/read-back pair. It reuses the daemon's register map and codecs (``fcrlive.daemon.registers``),
-``ModbusParams`` for host/port/timeouts and the bounded backoff of ``modbus_source``.
+It owns its own pymodbus client instead of sharing the daemon's ``ModbusSource``: ``ModbusSource.write``
+writes one point per request (no offset+enable+heartbeat FC16), reconnects in a background task without
+telling anyone (so "the first write after a reconnect is zero" could not be enforced from outside), and its
+20-50 Hz poller's watchdog may recreate the client in the middle of a write/read-back pair. It receives
+what it needs, a :class:`fcrlive.modbus.client.ModbusParams` (host/port/timeouts and the register map), and
+uses the register codecs of :mod:`fcrlive.modbus.registers` and the bounded backoff of
+:mod:`fcrlive.backoff`: it imports nothing from the daemon.
 """
 
 from __future__ import annotations
@@ -43,8 +44,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from fcrlive.daemon.modbus_source import ModbusParams, backoff_delays, quiet_pymodbus
-from fcrlive.daemon.registers import (
+from fcrlive.backoff import backoff_delays
+from fcrlive.errors import ConfigError
+from fcrlive.modbus.client import ModbusParams, quiet_pymodbus
+from fcrlive.modbus.registers import (
     ReadBlock,
     RegisterMap,
     RegisterPoint,
@@ -53,7 +56,6 @@ from fcrlive.daemon.registers import (
     encode_point,
     plan_reads,
 )
-from fcrlive.errors import ConfigError
 
 log = logging.getLogger("fcrlive.excitation")
 
@@ -180,8 +182,8 @@ def _f32(x: float) -> float:
 class ExcitationWriter:
     """The write link to one governor (module docstring). Async context manager.
 
-    ``params``: host, port, register map, request timeout and retries, backoff cap (the daemon's
-    ``ModbusParams``; its polling fields are not used). ``max_abs_hz``: the largest |offset| this writer
+    ``params``: host, port, register map, request timeout and retries, backoff cap (a ``ModbusParams``;
+    its polling fields are not used). ``max_abs_hz``: the largest |offset| this writer
     will ever send (the guard's amplitude). ``write_period_s``: how often the caller writes (checked
     against the device's heartbeat timeout).
     """

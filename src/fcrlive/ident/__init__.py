@@ -40,7 +40,7 @@ from fcrlive.ident.errors import (
     TooFewSamplesError,
     UnstableModelError,
 )
-from fcrlive.ident.freqresp import Z95, FreqResp, PeakGain
+from fcrlive.ident.freqresp import FreqResp, PeakGain
 from fcrlive.ident.pem import bj, oe
 from fcrlive.ident.poly import EstimationReport, PolyModel
 from fcrlive.ident.validation import (
@@ -57,7 +57,7 @@ from fcrlive.ident.validation import (
 )
 
 __all__ = [
-    "Z95", "CompareResult", "EstimationReport", "FreqResp", "IdData", "IdentError", "NonFiniteDataError",
+    "CompareResult", "EstimationReport", "FreqResp", "IdData", "IdentError", "NonFiniteDataError",
     "NotExcitingError", "OrderError", "OrderSearchResult", "PeakGain", "PolyModel", "ResidResult",
     "StrucTable", "TooFewSamplesError", "UnstableModelError", "aic", "arx", "arx_order_search", "arxstruc",
     "bic", "bj", "bj_order_search", "choose_fir_length", "compare", "fir_projection", "fpe", "oe",

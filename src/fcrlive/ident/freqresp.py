@@ -24,8 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-Z95 = 1.959963984540054
-"""Two-sided 95 % quantile of the standard normal distribution."""
+from fcrlive.constants import Z95
 
 
 @dataclass(frozen=True)
@@ -121,7 +120,11 @@ class FreqResp:
             gi = g[:, i:i + k]
             out += np.einsum("ij,jk,ik->i", gi, c, gi)
             i += k
-        return np.maximum(out, 0.0)
+        # a response that depends on estimated parameters but gets no variance from them (their
+        # covariance is missing, or does not reach this direction) has an UNKNOWN sd, not a zero one:
+        # NaN, so that no interval of zero width is ever shown
+        moves = np.any(g != 0.0, axis=1) if g.shape[1] else np.zeros(g.shape[0], bool)
+        return np.where(moves & ~(out > 0.0), np.nan, np.maximum(out, 0.0))
 
     @property
     def abs(self) -> np.ndarray:
@@ -165,7 +168,7 @@ class FreqResp:
         return np.sqrt(self._quad(np.imag(self.jacobian)))
 
     def ci95_abs(self) -> tuple[np.ndarray, np.ndarray]:
-        """95 % band of |G|: |G| ∓ 1.96 sd (lower edge clipped at 0)."""
+        """95 % band of |G|: |G| ∓ Z95·sd (lower edge clipped at 0)."""
         a, s = self.abs, self.sd_abs
         return np.maximum(a - Z95 * s, 0.0), a + Z95 * s
 

@@ -271,7 +271,8 @@ class PolyModel:
         """G_i(e^{jωTs}) = B_i/(A F_i) (or H = C/(A D) for ``input="noise"``) with its gradient.
 
         ``omega_rad_s`` in rad/s. The FreqResp carries ∂G/∂θ and this model's covariance, so sd_abs,
-        sd_phase and the algebra of uncertain responses work. Without covariance the sd are zero.
+        sd_phase and the algebra of uncertain responses work. Without covariance the sd are NaN
+        (unknown, as :attr:`sd`), never zero: a zero would read as an exact response.
         """
         omega = np.atleast_1d(np.asarray(omega_rad_s, dtype=float))
         zi = np.exp(-1j * omega * self.Ts)
@@ -295,7 +296,7 @@ class PolyModel:
             bpow = np.arange(k, k + self.nb[i])
             jac[:, s[("b", i)]] = (1.0 / (A * F))[:, None] * zi[:, None] ** bpow[None, :]
             jac[:, s[("f", i)]] = -(G / F)[:, None] * zk[:, :self.nf[i]]
-        cov = self.covariance if self.covariance is not None else np.zeros((self.n_params, self.n_params))
+        cov = self.covariance if self.covariance is not None else np.full((self.n_params,) * 2, np.nan)
         return FreqResp(omega, G, jac, ((self.uid, cov),))
 
     def static_gain(self, input: int | str = 0) -> tuple[float, float]:

@@ -10,7 +10,7 @@ simulated exactly with lfilter on the closed-loop polynomials (from rest). A del
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.signal as sps
@@ -31,9 +31,13 @@ class ClosedLoopData:
 
 
 def bj_model(b, c, d, f, nk: int, Ts: float = 1.0, noise_variance: float = 1.0) -> PolyModel:
-    """SISO BJ PolyModel from coefficient lists (b without the nk zeros, c, d, f with leading 1)."""
-    return PolyModel(a=[1.0], b=(np.concatenate((np.zeros(nk), b)),), c=c, d=d, f=(f,), nk=(nk,), Ts=Ts,
-                     noise_variance=noise_variance)
+    """SISO BJ PolyModel from coefficient lists (b without the nk zeros, c, d, f with leading 1).
+
+    A true system is known exactly: its covariance is zero (a model without covariance has an unknown,
+    NaN, uncertainty)."""
+    m = PolyModel(a=[1.0], b=(np.concatenate((np.zeros(nk), b)),), c=c, d=d, f=(f,), nk=(nk,), Ts=Ts,
+                  noise_variance=noise_variance)
+    return replace(m, covariance=np.zeros((m.n_params, m.n_params)))
 
 
 def simulate_open_loop(model: PolyModel, u: np.ndarray, rng: np.random.Generator, sigma_e: float) -> IdData:

@@ -10,6 +10,7 @@ Format (docs/plant-toml.md)::
     [unit.turbine]                 # Tw, q_nl, At, h_s, Pm0, Dturb
     [grid]                         # s_base_mw, x1, x2, D, damping_at, f0
     [grid.other]                   # the rest of the grid, same tables as [unit]
+    [unit.prequal]                 # prequalification data of the unit (plant/prequal_unit.py)
 
 Every key is optional; unknown keys, wrong types and out-of-range values raise
 :class:`fcrlive.errors.ConfigError` naming the key (``unit.governor.Kp``) and the file.
@@ -28,6 +29,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from fcrlive.errors import ConfigError
 from fcrlive.plant.params import Plant, Unit, preset
+from fcrlive.plant.prequal_unit import OperatingPoint as OperatingPoint
+from fcrlive.plant.prequal_unit import PrequalModel, UnitDescription, prequal_unit_from_model
+from fcrlive.plant.prequal_unit import PrequalUnit as PrequalUnit
 
 # --------------------------------------------------------------------------------------------------
 # Schema: every field optional (an override); strict types so "0.1" or true is not taken for a number.
@@ -51,6 +55,9 @@ class GovernorModel(_Strict):
     droop_placement: Literal["integral", "classic"] | None = None
     droop_signal: Literal["gate", "demand"] | None = None
     digital: bool | None = None
+    integral_method: Literal["forward", "backward", "tustin"] | None = None
+    Td: float | None = Field(None, ge=0)
+    Tdf: float | None = Field(None, ge=0)
 
 
 class ServoModel(_Strict):
@@ -78,6 +85,12 @@ class UnitModel(_Strict):
     turbine: TurbineModel | None = None
 
 
+class StudiedUnitModel(UnitModel):
+    """The studied unit: a unit plus its prequalification data (``[unit.prequal]``, prequal_unit.py)."""
+
+    prequal: PrequalModel | None = None
+
+
 class GridModel(_Strict):
     s_base_mw: float | None = Field(None, gt=0)
     x1: float | None = Field(None, ge=0)
@@ -90,7 +103,7 @@ class GridModel(_Strict):
 
 class PlantModel(_Strict):
     preset: str | None = None
-    unit: UnitModel | None = None
+    unit: StudiedUnitModel | None = None
     grid: GridModel | None = None
 
 
@@ -155,7 +168,7 @@ def plant_from_dict(d: dict[str, Any], where: str | None = None, base: Plant | N
             base = preset(model.preset)
         except ConfigError as exc:
             raise ConfigError(f"preset: {exc.message}", where=where) from None
-    changes = model.model_dump(exclude_none=True, exclude={"preset"})
+    changes = model.model_dump(exclude_none=True, exclude={"preset": True, "unit": {"prequal"}})
     plant = _override(base, changes)
     try:
         check_plant(plant)
@@ -164,9 +177,34 @@ def plant_from_dict(d: dict[str, Any], where: str | None = None, base: Plant | N
     return plant
 
 
+def unit_description_from_dict(
+    d: dict[str, Any], where: str | None = None, base: Plant | None = None
+) -> UnitDescription:
+    """The plant of ``d`` (as :func:`plant_from_dict`) and its ``[unit.prequal]`` section resolved into a
+    :class:`PrequalUnit` (None when the section is absent). ConfigError naming the key on bad input."""
+    plant = plant_from_dict(d, where=where, base=base)
+    model = PlantModel.model_validate(d)  # valid: plant_from_dict checked it
+    pq = model.unit.prequal if model.unit is not None else None
+    if pq is None:
+        return UnitDescription(plant, None)
+    try:
+        return UnitDescription(plant, prequal_unit_from_model(pq, plant))
+    except ConfigError as exc:
+        raise ConfigError(exc.message, where=where) from None
+
+
+def load_unit_description(path: str | Path, base: Plant | None = None) -> UnitDescription:
+    """Read a plant description TOML file with its ``[unit.prequal]`` section (docs/plant-toml.md)."""
+    return unit_description_from_dict(_read_toml(path), where=str(Path(path)), base=base)
+
+
 def load_plant(path: str | Path, base: Plant | None = None) -> Plant:
     """Read a plant description TOML file (format in docs/plant-toml.md); ``base`` as in
     :func:`plant_from_dict`."""
+    return plant_from_dict(_read_toml(path), where=str(Path(path)), base=base)
+
+
+def _read_toml(path: str | Path) -> dict[str, Any]:
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
@@ -178,7 +216,7 @@ def load_plant(path: str | Path, base: Plant | None = None) -> Plant:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"not valid TOML: {exc}", where=str(p)) from None
-    return plant_from_dict(data, where=str(p), base=base)
+    return data
 
 
 def plant_to_dict(plant: Plant) -> dict[str, Any]:

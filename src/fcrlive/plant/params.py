@@ -11,6 +11,7 @@ from typing import Literal
 
 DroopPlacement = Literal["integral", "classic"]
 DroopSignal = Literal["gate", "demand"]
+IntegralMethod = Literal["forward", "backward", "tustin"]
 DampingAt = Literal["coi", "load_bus"]
 
 
@@ -38,6 +39,18 @@ class Governor:
     ``"demand"`` (the controller output c, as in a classic HYGOV temporary-droop governor).
     ``digital`` governors run at the controller sample time Tc with a zero-order hold on c;
     analogue ones (the paper's plant 2) are integrated continuously.
+
+    A digital governor's integral is discretised by ``integral_method`` with k = Kp Tc/Ti and w the
+    integral channel's input (e − ρ(x − x0)):
+
+    - ``"forward"`` (forward Euler, the paper's plant and the default): I[n+1] = I[n] + k w[n];
+    - ``"backward"`` (backward Euler): I[n] = I[n−1] + k w[n];
+    - ``"tustin"`` (trapezoid): I[n] = I[n−1] + (k/2)(w[n] + w[n−1]).
+
+    ``Td > 0`` adds derivative action Kp Td s/(1 + Tdf s) on the PID's input (e with the droop in the
+    integral channel, e − ρ(x − x0) around the whole PID), discretised by backward differences:
+    D[n] = a D[n−1] + b (e[n] − e[n−1]), a = Tdf/(Tdf + Tc), b = Kp Td/(Tdf + Tc). The simulator runs a
+    governor with derivative action on its linear model only (``SimConfig(model="linear")``).
     """
 
     Kp: float = 1.0
@@ -53,6 +66,27 @@ class Governor:
     droop_placement: DroopPlacement = "integral"
     droop_signal: DroopSignal = "gate"
     digital: bool = True
+    integral_method: IntegralMethod = "forward"
+    """Discretisation of a digital governor's integral (class docstring)."""
+    Td: float = 0.0
+    """Derivative time [s]; 0: a PI governor."""
+    Tdf: float = 0.0
+    """Time constant of the derivative's filter [s] (needed, > 0, when Td > 0)."""
+
+    @property
+    def integral_feedthrough(self) -> float:
+        """α with I[n] = (state) + α k w[n]: 0 forward Euler, 1 backward Euler, 1/2 Tustin (and for an
+        analogue governor, which the discrete-time view approximates by Tustin)."""
+        if not self.digital:
+            return 0.5
+        return {"forward": 0.0, "backward": 1.0, "tustin": 0.5}[self.integral_method]
+
+    @property
+    def derivative_coefficients(self) -> tuple[float, float]:
+        """(a, b) of the digital derivative D[n] = a D[n−1] + b (e[n] − e[n−1]); (0, 0) without it."""
+        if not self.Td > 0:
+            return 0.0, 0.0
+        return self.Tdf / (self.Tdf + self.Tc), self.Kp * self.Td / (self.Tdf + self.Tc)
 
 
 @dataclass(frozen=True)

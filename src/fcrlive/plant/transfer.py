@@ -38,10 +38,13 @@ The digital PI (``Governor.digital``) runs, with the integral updated by forward
     c[n]   = Kp·(e[n] − ρ·(x[n] − x0)) + I[n]                 (classic placement)
     I[n+1] = I[n] + Tc·(Kp/Ti)·(e[n] − ρ·(x[n] − x0))
 
-so G_c(z) = Kp + Kp Tc/(Ti (z − 1)) and K_I(z) = Kp Tc/(Ti (z − 1)). x[n] is the sampled gate position
-a[n] (``"gate"``) or c[n] (``"demand"``; with the classic placement this is an algebraic loop, solved
-exactly: c[n] = (Kp e[n] + I[n])/(1 + ρ Kp)). An analogue governor (``digital=False``) is approximated at
-Tc by the Tustin transform of its PI, which is what a logger at 1/Tc sees of it.
+so G_c(z) = Kp + Kp Tc/(Ti (z − 1)) and K_I(z) = Kp Tc/(Ti (z − 1)). Other discretisations of the
+integral (``Governor.integral_method``: backward Euler, Tustin) give K_I(z) = k (α z + 1 − α)/(z − 1),
+k = Kp Tc/Ti; derivative action (``Governor.Td``) adds b (z − 1)/(z − a) to G_c(z) (params.Governor).
+x[n] is the sampled gate position a[n] (``"gate"``) or c[n] (``"demand"``; with the classic placement
+this is an algebraic loop, solved exactly: c[n] = (Kp e[n] + I[n])/(1 + ρ Kp)). An analogue governor
+(``digital=False``) is approximated at Tc by the Tustin transform of its PI, which is what a logger at
+1/Tc sees of it.
 
 The continuous parts are ZOH-discretised exactly (matrix exponential): c[n] really is held, so
 G_s(z), G_jp(z) are exact. For the path from u[n] to ε[n], u (the filtered electrical power) is treated
@@ -294,6 +297,12 @@ def _continuous_blocks(unit: Unit) -> tuple[_Blocks, Rat, Rat, Rat]:
     lin = turbine_linear(unit.turbine)
     G_c = (_p(gov.Kp * gov.Ti, gov.Kp), _p(gov.Ti, 0.0))
     K_I = (_p(gov.Kp), _p(gov.Ti, 0.0))
+    if gov.Td > 0:
+        # PID Kp (1 + 1/(Ti s) + Td s/(1 + Tdf s)) over the common denominator Ti s (1 + Tdf s).
+        lag = _p(gov.Tdf, 1.0)
+        K_I = (np.polymul(K_I[0], lag), np.polymul(K_I[1], lag))
+        num = np.polyadd(np.polymul(G_c[0], lag), _p(gov.Kp * gov.Ti * gov.Td, 0.0, 0.0))
+        G_c = (num, K_I[1])
     G_s = (_p(1.0), _p(unit.servo.Tg, 1.0))
     G_J = (_p(1.0), _p(2.0 * unit.swing.H, effective_damping(unit)))
     F_aa = (_p(1.0), _p(gov.Tf, 1.0))
@@ -302,19 +311,42 @@ def _continuous_blocks(unit: Unit) -> tuple[_Blocks, Rat, Rat, Rat]:
 
 
 def _discrete_governor(unit: Unit) -> _Blocks:
-    ct = _control()
     gov = unit.governor
     Tc = gov.Tc
-    if gov.digital:
+    if gov.digital and gov.integral_method == "forward" and not gov.Td > 0:
         # Forward-Euler integral: I[n+1] uses e[n], one sample of delay in K_I.
         K_I = (_p(gov.Kp * Tc / gov.Ti), _p(1.0, -1.0))
-    else:
+    elif not gov.digital and not gov.Td > 0:
         k = gov.Kp * Tc / (2.0 * gov.Ti)
         K_I = (_p(k, k), _p(1.0, -1.0))
+    elif not gov.Td > 0:
+        # I[n] = I[n−1] + k (α w[n] + (1 − α) w[n−1]): backward Euler α = 1, Tustin α = 1/2.
+        k, al = gov.Kp * Tc / gov.Ti, gov.integral_feedthrough
+        K_I = (_p(k * al, k * (1.0 - al)), _p(1.0, -1.0))
+    else:
+        # PID: K_I, and the derivative b (z − 1)/(z − a), over the common denominator (z − 1)(z − a).
+        k, al = gov.Kp * Tc / gov.Ti, gov.integral_feedthrough
+        a, b = gov.derivative_coefficients
+        den = np.polymul(_p(1.0, -1.0), _p(1.0, -a))
+        K_I = (np.polymul(_p(k * al, k * (1.0 - al)), _p(1.0, -a)), den)
+        num = np.polyadd(np.polyadd(gov.Kp * den, K_I[0]), b * np.polymul(_p(1.0, -1.0), _p(1.0, -1.0)))
+        return _governor_blocks(unit, (num, den), K_I, _servo_z(unit, Tc))
     G_c = (np.polyadd(gov.Kp * K_I[1], K_I[0]), K_I[1])
-    zs = ct.sample_system(_tf((_p(1.0), _p(unit.servo.Tg, 1.0))), Tc, method="zoh")
-    G_s = (_p(*zs.num[0][0]), _p(*zs.den[0][0]))
-    return _governor_blocks(unit, G_c, K_I, G_s)
+    return _governor_blocks(unit, G_c, K_I, _servo_z(unit, Tc))
+
+
+def governor_z(gov) -> tuple[Rat, Rat]:
+    """(G_c(z), K_ρ(z)) of a digital governor as (num, den) in descending powers of z at dt = Tc, sharing
+    the denominator: the controller c = G_c ε − ρ K_ρ x with the droop signal x (gate or demand), K_ρ = K_I
+    (integral placement) or G_c (classic). Used by analysis.controller for the exact c/ε."""
+    unit = Unit(name="governor", rated_mw=1.0, governor=gov)
+    b = _discrete_governor(unit)
+    return b.G_c, (b.K_I if gov.droop_placement == "integral" else b.G_c)
+
+
+def _servo_z(unit: Unit, Tc: float) -> Rat:
+    zs = _control().sample_system(_tf((_p(1.0), _p(unit.servo.Tg, 1.0))), Tc, method="zoh")
+    return _p(*zs.num[0][0]), _p(*zs.den[0][0])
 
 
 def droop_feedback(plant: Plant) -> TransferFunction:

@@ -74,14 +74,17 @@ class ClosedLoop:
 def closed_loop(plant: Plant, open_loop: bool = False) -> ClosedLoop:
     """The :class:`ClosedLoop` of ``plant`` (cached)."""
     m = mdl.build(plant)
-    nx, nz, nw = m.nx, m.nx + 1, len(INPUTS)
-    I1 = nx
     k = m.ctl1
+    # A derivative action's state ψ (model.Controller) is the row after the integrator's.
+    nx, nz, nw = m.nx, m.nx + (2 if k.has_derivative else 1), len(INPUTS)
+    I1 = nx
     e_F1, e_G1, e_I1 = np.eye(nz)[mdl.F1], np.eye(nz)[mdl.G1], np.eye(nz)[I1]
     # ε = E_z z + E_w w; Δc = ce ε + ci i1 + cg Δa; i1⁺ = i1 + Tc Ki (ie ε + ii i1 + ig Δa).
     E_z = np.zeros(nz) if open_loop else -e_F1
     E_w = np.array([1.0, -1.0, 0.0, 0.0, -1.0 if open_loop else 0.0])
     Dc_z = k.ce * E_z + k.ci * e_I1 + k.cg * e_G1
+    if k.has_derivative:
+        Dc_z = Dc_z + k.cd * np.eye(nz)[I1 + 1]
     Dc_w = k.ce * E_w
     Phi = np.zeros((nz, nz))
     Gam = np.zeros((nz, nw))
@@ -93,6 +96,11 @@ def closed_loop(plant: Plant, open_loop: bool = False) -> ClosedLoop:
     kt = m.Tc * k.Ki
     Phi[I1] = e_I1 + kt * (k.ie * E_z + k.ii * e_I1 + k.ig * e_G1)
     Gam[I1] = kt * k.ie * E_w
+    if k.has_derivative:
+        e_D = np.eye(nz)[I1 + 1]
+        Phi[I1] += kt * k.id * e_D
+        Phi[I1 + 1] = k.de * E_z + k.di * e_I1 + k.dd * e_D + k.dg * e_G1
+        Gam[I1 + 1] = k.de * E_w
     C = np.zeros((len(OUTPUTS), nz))
     D = np.zeros((len(OUTPUTS), nw))
     C[0] = -E_z  # y = y_gov + v

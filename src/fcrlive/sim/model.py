@@ -81,9 +81,23 @@ class Controller:
     ig: float
     Ki: float
     """Integral gain Kp/Ti [1/s]."""
+    # Derivative action (Governor.Td > 0): a second state ψ with Δc += cd·ψ, the integrator input
+    # += id·ψ and ψ[n+1] = de·e + di·i + dd·ψ + dg·g. All zero for a PI.
+    cd: float = 0.0
+    id: float = 0.0
+    de: float = 0.0
+    di: float = 0.0
+    dd: float = 0.0
+    dg: float = 0.0
+
+    @property
+    def has_derivative(self) -> bool:
+        return self.cd != 0.0
 
     @staticmethod
     def of(gov: Governor) -> Controller:
+        if gov.digital and (gov.integral_method != "forward" or gov.Td > 0):
+            return Controller._general(gov)
         Kp, rho = gov.Kp, gov.droop
         if gov.droop_signal == "gate":
             cg = -Kp * rho if gov.droop_placement == "classic" else 0.0
@@ -97,6 +111,34 @@ class Controller:
             cg = 0.0
             ie, ii, ig = 1.0 - rho * ce, -rho * ci, 0.0
         return Controller(ce=ce, ci=ci, cg=cg, ie=ie, ii=ii, ig=ig, Ki=Kp / gov.Ti)
+
+    @staticmethod
+    def _general(gov: Governor) -> Controller:
+        """Any integral discretisation, with or without derivative action (params.Governor).
+
+        With w = e − ρx, e_P = w around the whole PID (classic) or e (integral placement), k = Tc Kp/Ti,
+        α the integral's feedthrough and ψ[n] = a D[n−1] − b e_P[n−1] the derivative's state:
+        c = Kp e_P + i + α k w + b e_P + ψ, i[n+1] = i + k w, ψ[n+1] = a ψ + (a − 1) b e_P. With the
+        demand as droop signal (x = c) the algebraic loop is solved exactly.
+        """
+        Kp, rho, Ki = gov.Kp, gov.droop, gov.Kp / gov.Ti
+        k = gov.Tc * Ki
+        al = gov.integral_feedthrough
+        a, b = gov.derivative_coefficients
+        cls = 1.0 if gov.droop_placement == "classic" else 0.0
+        d = 1.0 if gov.Td > 0 else 0.0
+        # c = Ae e + Ax x + i + d ψ
+        Ae = Kp + al * k + b
+        Ax = -rho * al * k - cls * rho * (Kp + b)
+        be = (a - 1.0) * b  # ψ[n+1] = a ψ + be e_P
+        if gov.droop_signal == "gate":
+            return Controller(ce=Ae, ci=1.0, cg=Ax, ie=1.0, ii=0.0, ig=-rho, Ki=Ki, cd=d, id=0.0,
+                              de=be, di=0.0, dd=a, dg=-cls * rho * be)
+        s = 1.0 / (1.0 - Ax)
+        ce, ci, cd = Ae * s, s, d * s
+        return Controller(ce=ce, ci=ci, cg=0.0, ie=1.0 - rho * ce, ii=-rho * ci, ig=0.0, Ki=Ki, cd=cd,
+                          id=-rho * cd, de=be * (1.0 - cls * rho * ce), di=-be * cls * rho * ci,
+                          dd=a - be * cls * rho * cd, dg=0.0)
 
 
 @dataclass(frozen=True)
@@ -184,6 +226,10 @@ def _check(plant: Plant) -> None:
                             ("H", u.swing.H), ("rated_mw", u.rated_mw)):
             if not value > 0:
                 raise ConfigError(f"{u.name}: {name} must be positive, got {value}")
+    if u1.governor.Td > 0 and not u1.governor.Tdf > 0:
+        raise ConfigError(f"{u1.name}: derivative action (Td > 0) needs a filter time constant Tdf > 0")
+    if u2.governor.Td > 0:
+        raise ConfigError("the simulator models the rest of the grid (grid.other) without derivative action")
     if not plant.unit.governor.Tc > 0:
         raise ConfigError(f"controller sample time Tc must be positive, got {plant.unit.governor.Tc}")
     if plant.grid.damping_at == "load_bus" and not plant.grid.D > 0:

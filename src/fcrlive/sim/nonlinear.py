@@ -57,6 +57,8 @@ class Stepper:
     def __init__(self, plant, *, open_loop: bool = False, integrator: Integrator = "exp",
                  substeps: int | None = None, nonlinear: bool = True):
         self.m = m = mdl.build(plant)
+        if m.ctl1.has_derivative:
+            raise _derivative_error()
         self.open_loop = open_loop
         self.integrator = integrator
         self.nonlinear = nonlinear
@@ -213,6 +215,10 @@ def run_single(plant, inp: Inputs, *, open_loop: bool = False, nonlinear: bool =
                integrator: Integrator = "exp", substeps: int | None = None, tol: float = 1e-10,
                max_iter: int = 40) -> dict[str, np.ndarray]:
     """One run from the steady state (module docstring); returns the :data:`RAW` signals, length N."""
+    if mdl.build(plant).ctl1.has_derivative:
+        if nonlinear:
+            raise _derivative_error()
+        return _linear_outputs(plant, inp, open_loop)
     st = Stepper(plant, open_loop=open_loop, integrator=integrator, substeps=substeps, nonlinear=nonlinear)
     cl = lin.closed_loop(plant, open_loop)
     if integrator == "exp":
@@ -236,6 +242,22 @@ def run_single(plant, inp: Inputs, *, open_loop: bool = False, nonlinear: bool =
         else:
             z = _step_all(st, inp)
     return _outputs_from_states(st, z[:st.nx], z[st.nx], inp)
+
+
+def _derivative_error():
+    from fcrlive.errors import ConfigError
+
+    return ConfigError("a governor with derivative action (Td > 0) is simulated by the linear model only: "
+                       "SimConfig(model='linear'), one run at a time")
+
+
+def _linear_outputs(plant, inp: Inputs, open_loop: bool) -> dict[str, np.ndarray]:
+    """The :data:`RAW` signals of the linear closed loop (:func:`linear.run`), for any controller."""
+    cl = lin.closed_loop(plant, open_loop)
+    o = dict(zip(lin.OUTPUTS, lin.run(cl, _w_matrix(inp)), strict=True))
+    m = cl.model
+    return {"y": o["y"], "epsilon": o["epsilon"], "c": o["dc"] + m.tp1.g0, "a": o["da"] + m.tp1.g0,
+            "u": o["u"], "w_coi": o["w_coi"], "pm": o["dpm"] + m.tp1.Pm0, "omega": o["omega"]}
 
 
 def _fixed_point_exp(st: Stepper, cl, inp: Inputs, tol: float, max_iter: int) -> np.ndarray:
@@ -454,6 +476,8 @@ def run_batch(plant, N: int, seeds, *, r: np.ndarray, app: np.ndarray | None, si
     """Realisations of ``seeds`` stepped together. Returns the requested :data:`RAW` fields (plus "v",
     "load") as (N, R) arrays. Draws of each stream are made in blocks, which gives the same numbers as
     one draw of N (numpy's Generator is sequential)."""
+    if mdl.build(plant).ctl1.has_derivative:
+        raise _derivative_error()
     if integrator == "exp":
         return _run_batch_exp(plant, N, seeds, r=r, app=app, sigma_l=sigma_l, sigma_v=sigma_v,
                               load_det=load_det, fields=fields, open_loop=open_loop, nonlinear=nonlinear,
@@ -467,6 +491,8 @@ def run_batch_linear(plant, N: int, seeds, *, r: np.ndarray, app: np.ndarray | N
                      sigma_v: float, load_det: np.ndarray | None, fields, open_loop: bool = False,
                      block: int = 2048) -> dict[str, np.ndarray]:
     """The linear model's batch: one matrix product per sample (:func:`run_batch` without the residual)."""
+    if mdl.build(plant).ctl1.has_derivative:
+        raise _derivative_error()
     return _run_batch_exp(plant, N, seeds, r=r, app=app, sigma_l=sigma_l, sigma_v=sigma_v,
                           load_det=load_det, fields=fields, open_loop=open_loop, nonlinear=False, chunk=block)
 

@@ -110,15 +110,25 @@ class RealtimeSimulator:
         """Index of the next sample."""
         return self._n
 
-    def step(self, r: float = 0.0) -> StepSample:
-        """Sample n with excitation ``r`` [pu] applied, then advance the plant to n + 1."""
+    def step(self, r: float = 0.0, applied_hz: float | None = None) -> StepSample:
+        """Sample n with excitation ``r`` [pu] applied, then advance the plant to n + 1.
+
+        ``applied_hz``: the open-loop industry-test mode for this sample (as ``SimConfig.applied_freq_hz``):
+        this applied frequency [Hz] replaces the governor's speed feedback; the unit stays on the grid.
+        """
         r = float(r)
         if not math.isfinite(r):
             raise ValueError(f"excitation must be finite, got {r}")
+        app = None
+        if applied_hz is not None:
+            if not math.isfinite(applied_hz):
+                raise ValueError(f"applied frequency must be finite, got {applied_hz}")
+            app = np.array([float(applied_hz) / self.f0 - 1.0])
         e_l, e_v, e_p, e_f = self._noise()
         x, st, m = self._x, self._st, self._m
         v = self.process_noise_std * e_v
-        y, eps, c, dc, i1n = st.control(x, self._i1, r, v, None)
+        st.open_loop = app is not None  # the Stepper reads the flag at every control() call
+        y, eps, c, dc, i1n = st.control(x, self._i1, r, v, app)
         pl1 = self._pl + self._sl * e_l
         x_next, self._nprev = st.advance(x, dc, np.array([self._pl]), np.array([pl1]), self._nprev)
         xs = x[:, 0]

@@ -12,9 +12,15 @@ problem that would make an identification silently wrong raises :class:`fcrlive.
 ``where="FILE, row N"`` (row 1 is the header, so N is the line an editor shows). Writing is strict:
 ASCII, CRLF, fixed decimals, millisecond time stamps.
 
-Gaps (an interval longer than 1.5x the median) are reported in :attr:`TsoLog.gaps`. Up to ``max_fill``
-missing samples (default 3) on the sampling grid are filled by linear interpolation and flagged in
-:attr:`TsoLog.filled`; longer gaps split the log into :attr:`TsoLog.segments`, never interpolated.
+Gaps (the gap rule of :mod:`fcrlive.signals`: an interval longer than 1.5x the median) are reported in
+:attr:`TsoLog.gaps`. Up to ``max_fill`` missing samples (default 3) on the sampling grid are filled by
+linear interpolation and flagged in :attr:`TsoLog.filled`; longer gaps split the log into
+:attr:`TsoLog.segments`, never interpolated.
+
+Reading is a sequence of steps: the file's bytes in bounded chunks (:mod:`fcrlive.tso.rawfile`), the
+parsing core (:func:`parse_table`: header, rows, time stamps and typed columns, vectorised in blocks of
+lines by :mod:`fcrlive.tso.csvparse`), the file name, the sample grid (:func:`_regularise`), and
+the notes.
 """
 
 from __future__ import annotations
@@ -22,15 +28,17 @@ from __future__ import annotations
 import csv
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
-from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
 
 from fcrlive.errors import DataError
+from fcrlive.signals import GAP_FACTOR, Filled, fill_gaps, find_gaps, is_gap, median_interval
+from fcrlive.tso import csvparse
+from fcrlive.tso.csvparse import NUMBER
 from fcrlive.tso.names import TsoFileName, parse_tso_filename
 
 # --- column vocabulary ------------------------------------------------------------------------------
@@ -85,7 +93,7 @@ REQUIRED_COLUMNS: tuple[str, ...] = ("InsAcPow", "GridFreq")
 _CANONICAL = {name.lower(): name for name in KNOWN_UNITS}
 _CANONICAL["datetime"] = "DateTime"
 
-_COMPACT_TS = re.compile(r"^(\d{4})(\d{2})(\d{2})T(\d{2})(\d{2})(\d{2})(?:\.(\d{1,9}))?$")
+_COMPACT_TS = re.compile(r"^(\d{4})(\d{2})(\d{2})T(\d{2})(\d{2})(\d{2})(?:\.(\d{1,9}))?$", re.ASCII)
 _PERIOD_SUFFIX = re.compile(r"^datetime(\d+(?:\.\d+)?)$", re.IGNORECASE)
 _HEADER_UNIT = re.compile(r"^(.*?)\s*[\[(]([^\])]*)[\])]$")
 _EPOCH = datetime(1970, 1, 1)
@@ -96,7 +104,8 @@ _EPOCH = datetime(1970, 1, 1)
 
 @dataclass(frozen=True)
 class Gap:
-    """A hole in the time stamps: an interval longer than 1.5x the median sample interval."""
+    """A hole in the time stamps: an interval longer than 1.5x the median sample interval (the gap rule of
+    :mod:`fcrlive.signals`)."""
 
     row: int
     """File row of the first sample after the gap (row 1 is the header)."""
@@ -184,8 +193,8 @@ class TsoLog:
     ) -> TsoLog:
         """A log from arrays (e.g. a simulation or a store export), no filled samples.
 
-        Intervals longer than 1.5x the median are recorded as gaps (never filled) and split the log
-        into segments, as when reading a file.
+        Gaps (intervals longer than 1.5x the median, :mod:`fcrlive.signals`) are recorded, never filled,
+        and split the log into segments, as when reading a file.
         """
         t = np.asarray(t_s, dtype=np.float64)
         if t.ndim != 1 or t.size < 2 or not np.all(np.diff(t) > 0):
@@ -195,21 +204,18 @@ class TsoLog:
         for k, v in columns.items():
             a = np.asarray(v)
             cols[k] = a if a.dtype.kind in "US" else a.astype(np.float64)
-        dt = np.diff(t)
-        ts = float(np.median(dt))
-        breaks = np.flatnonzero(dt > 1.5 * ts)
+        found = find_gaps(t)
         gaps = tuple(
             Gap(
                 row=0,
                 start=start + timedelta(seconds=float(t[i])),
                 t_s=float(t[i]),
-                length_s=float(dt[i]),
-                missing=round(dt[i] / ts) - 1,
+                length_s=float(t[i + 1] - t[i]),
+                missing=int(m),
                 filled=False,
             )
-            for i in breaks
+            for i, m in zip(found.index, found.missing)
         )
-        bounds = [0, *(int(i) + 1 for i in breaks), t.size]
         return cls(
             t_s=t,
             start=start,
@@ -217,8 +223,8 @@ class TsoLog:
             period_s=period_s,
             units=dict(units or {}),
             timezone=timezone,
-            sample_s=ts,
-            segments=tuple(pairwise(bounds)),
+            sample_s=found.ts,
+            segments=found.segments,
             gaps=gaps,
         )
 
@@ -263,6 +269,8 @@ def _parse_one_timestamp(text: str) -> int:
         us = _frac_to_us(frac)
     else:
         # Lenient: ISO 8601 with separators (2026-11-01T00:00:00.020, optionally with an offset).
+        if not s.isascii():
+            raise ValueError("time stamps are ASCII")
         dt = datetime.fromisoformat(s)
         if dt.tzinfo is not None:
             dt = dt.astimezone(UTC).replace(tzinfo=None)
@@ -281,11 +289,7 @@ def _frac_to_us(frac: str) -> int:
 
 def _parse_timestamps(values: list[str], rows: np.ndarray, where: str) -> np.ndarray:
     """Microseconds since 1970 (int64) for each time stamp; DataError quoting the first bad one."""
-    n = len(values)
-    fast = _parse_timestamps_fast(values)
-    if fast is not None:
-        return fast
-    out = np.empty(n, dtype=np.int64)
+    out = np.empty(len(values), dtype=np.int64)
     for i, v in enumerate(values):
         try:
             out[i] = _parse_one_timestamp(v)
@@ -295,53 +299,6 @@ def _parse_timestamps(values: list[str], rows: np.ndarray, where: str) -> np.nda
                 where=f"{where}, row {rows[i]}",
             ) from None
     return out
-
-
-def _parse_timestamps_fast(values: list[str]) -> np.ndarray | None:
-    """Vectorised parse when all stamps are the compact form of one length; None to fall back."""
-    n = len(values)
-    width = len(values[0])
-    if width < 15 or width == 16 or width > 25:
-        return None
-    try:
-        raw = "".join(values).encode("ascii")
-    except UnicodeEncodeError:
-        return None
-    if len(raw) != n * width:
-        return None
-    b = np.frombuffer(raw, dtype=np.uint8).reshape(n, width)
-    if np.any(b[:, 8] != ord("T")) or (width > 15 and np.any(b[:, 15] != ord("."))):
-        return None
-    digit_cols = [*range(8), *range(9, 15), *range(16, width)]
-    d = b[:, digit_cols].astype(np.int64) - ord("0")
-    if np.any((d < 0) | (d > 9)):
-        return None
-
-    def num(cols: slice) -> np.ndarray:
-        part = d[:, cols]
-        weights = 10 ** np.arange(part.shape[1] - 1, -1, -1, dtype=np.int64)
-        return part @ weights
-
-    year, month, day = num(slice(0, 4)), num(slice(4, 6)), num(slice(6, 8))
-    hour, minute, sec = num(slice(8, 10)), num(slice(10, 12)), num(slice(12, 14))
-    if np.any((month < 1) | (month > 12) | (day < 1) | (hour > 23) | (minute > 59) | (sec > 59)):
-        return None
-    months = (year - 1970).astype("datetime64[Y]").astype("datetime64[M]") + (month - 1).astype(
-        "timedelta64[M]"
-    )
-    dates = months.astype("datetime64[D]") + (day - 1).astype("timedelta64[D]")
-    if np.any(dates.astype("datetime64[M]") != months):  # e.g. 31 November
-        return None
-    us = dates.astype("datetime64[us]").astype(np.int64)
-    us += ((hour * 60 + minute) * 60 + sec) * 1_000_000
-    nfrac = width - 16
-    if nfrac > 0:
-        frac = num(slice(14, 14 + nfrac))
-        if nfrac <= 6:
-            us += frac * 10 ** (6 - nfrac)
-        else:
-            us += np.rint(frac / 10 ** (nfrac - 6)).astype(np.int64)
-    return us
 
 
 def _us_to_datetime(us: int) -> datetime:
@@ -398,25 +355,12 @@ def _strip_period(headers: list[str], where: str) -> tuple[list[str], float | No
 def _float_column(
     values: list[str], name: str, rows: np.ndarray, where: str, strict: bool
 ) -> np.ndarray | None:
-    """Float64 array; for ``strict`` columns any bad/empty/non-finite value raises DataError.
+    """Float64 array by the strict ASCII number grammar (:data:`fcrlive.tso.csvparse.NUMBER`); for
+    ``strict`` columns any bad/empty/non-finite value raises DataError.
 
     Non-strict columns allow empty cells (NaN) and return None if a value is not a number (then the
     caller keeps the column as text).
     """
-    try:
-        arr = np.array(values, dtype=np.float64)
-    except ValueError:
-        arr = None
-    if arr is not None:
-        if strict:
-            bad = ~np.isfinite(arr)
-            if np.any(bad):
-                i = int(np.argmax(bad))
-                raise DataError(
-                    f"column {name}: value {values[i].strip()!r} is not a finite number",
-                    where=f"{where}, row {rows[i]}",
-                )
-        return arr
     out = np.empty(len(values), dtype=np.float64)
     for i, v in enumerate(values):
         s = v.strip()
@@ -425,16 +369,292 @@ def _float_column(
                 raise DataError(f"column {name}: empty value", where=f"{where}, row {rows[i]}")
             out[i] = np.nan
             continue
-        try:
+        if NUMBER.fullmatch(s):
             out[i] = float(s)
-        except ValueError:
-            if strict:
-                hint = " (decimal comma? the format uses '.')" if "," in s or s.count(".") == 0 else ""
+            if strict and not math.isfinite(out[i]):
                 raise DataError(
-                    f"column {name}: cannot read {s!r} as a number{hint}", where=f"{where}, row {rows[i]}"
-                ) from None
+                    f"column {name}: value {s!r} is not a finite number", where=f"{where}, row {rows[i]}"
+                )
+            continue
+        if not strict:
             return None
+        if s.lower().lstrip("+-") in ("nan", "inf", "infinity"):
+            raise DataError(
+                f"column {name}: value {s!r} is not a finite number", where=f"{where}, row {rows[i]}"
+            )
+        if "," in s or (s.count(".") == 0 and s.replace(",", "").isdigit()):
+            hint = " (decimal comma? the format uses '.')"
+        elif not s.isascii():
+            hint = " (non-ASCII characters; the format is ASCII digits 0-9)"
+        else:
+            hint = " (the format is ASCII digits, '.' decimals, e.g. 50.012)"
+        raise DataError(
+            f"column {name}: cannot read {s[:40]!r}{'...' if len(s) > 40 else ''} as a number{hint}",
+            where=f"{where}, row {rows[i]}",
+        )
     return out
+
+
+def _chunks(source: str | bytes | Path | Iterable[bytes], where: str) -> Iterable[bytes]:
+    """The bytes to parse: a path is read in bounded chunks (:mod:`fcrlive.tso.rawfile`), text encoded."""
+    from fcrlive.tso.rawfile import iter_bytes
+
+    if isinstance(source, Path):
+        return iter_bytes(source, where)
+    if isinstance(source, str):
+        return [source.encode("utf-8")]
+    if isinstance(source, (bytes, bytearray, memoryview)):
+        return [bytes(source)]
+    return source
+
+
+def _read_header_line(line: bytes, where: str) -> list[str]:
+    text = _decode(line).rstrip("\n")
+    text = text[:-1] if text.endswith("\r") else text
+    if not text.strip():
+        raise DataError("empty file: no header line", where=where)
+    if ";" in text and "," not in text:
+        raise DataError(
+            "semicolon separated; the TSO format is comma separated with '.' decimals", where=where
+        )
+    try:
+        return next(csv.reader([text]))
+    except csv.Error as exc:
+        raise DataError(
+            f"header line cannot be read as CSV ({exc}): is it a TSO log?", where=f"{where}, row 1"
+        ) from None
+
+
+@dataclass(frozen=True)
+class Header:
+    """The header line of a TSO CSV file, interpreted."""
+
+    names: list[str]
+    """Canonical column names, ``DateTime`` first, period suffix stripped."""
+    units: dict[str, str]
+    """Units given in the header (``GridFreq [Hz]``)."""
+    period_s: float | None
+    """Sine-test period [s] from the header suffix (``DateTime40``), None for other logs."""
+
+
+def _parse_header(record: list[str], required: tuple[str, ...], where: str) -> Header:
+    """Canonical names, units and sine-test period of the header record; DataError when a name is empty,
+    repeated, the first is not DateTime or a required column is missing."""
+    header = list(record)
+    if len(header) > 1 and header[-1].strip() == "":
+        header = header[:-1]  # trailing comma
+    header, period_s = _strip_period(header, where)
+    names: list[str] = []
+    units: dict[str, str] = {}
+    for h in header:
+        name, unit = _canonical_header(h)
+        if not name:
+            raise DataError("empty column header", where=f"{where}, row 1")
+        if name in names:
+            raise DataError(f"column {name} appears twice in the header", where=f"{where}, row 1")
+        names.append(name)
+        if unit is not None:
+            units[name] = unit
+    if names[0] != "DateTime":
+        raise DataError(
+            f"first column must be DateTime, found {header[0].strip()!r}", where=f"{where}, row 1"
+        )
+    missing = [c for c in required if c not in names]
+    if missing:
+        raise DataError(
+            f"missing required column{'s' if len(missing) > 1 else ''} {', '.join(missing)} "
+            f"(found {', '.join(names[1:]) or 'none'})",
+            where=where,
+        )
+    return Header(names=names, units=units, period_s=period_s)
+
+
+def _data_records(
+    records: list[list[str]], ncol: int, where: str, rows: list[int] | None = None
+) -> tuple[list[list[str]], np.ndarray]:
+    """The data records with ``ncol`` fields each and their file rows (blank lines skipped, a trailing
+    comma dropped); DataError naming the row with another number of fields. ``rows``: the file row of
+    each record (default: 2, 3, ...)."""
+    cells: list[list[str]] = []
+    row_numbers: list[int] = []
+    for k, rec in enumerate(records):
+        i = rows[k] if rows is not None else k + 2
+        if not rec or (len(rec) == 1 and not rec[0].strip()):
+            continue  # blank line: harmless
+        if len(rec) == ncol + 1 and not rec[-1].strip():
+            rec = rec[:-1]  # trailing comma
+        if len(rec) != ncol:
+            hint = " (decimal commas? the format uses '.')" if len(rec) > ncol else ""
+            raise DataError(
+                f"row has {len(rec)} fields, the header has {ncol}{hint}", where=f"{where}, row {i}"
+            )
+        cells.append(rec)
+        row_numbers.append(i)
+    return cells, np.asarray(row_numbers, dtype=np.int64)
+
+
+def _stamp_text(us: int) -> str:
+    """A time stamp [µs since 1970] as ``YYYYMMDDThhmmss.nnn`` (6 fractional digits if not whole ms)."""
+    dt = _us_to_datetime(us)
+    if dt.microsecond % 1000:
+        return f"{dt:%Y%m%dT%H%M%S.%f}"
+    return format_timestamp(dt)
+
+
+def _check_time_order(t_us: np.ndarray, rows: np.ndarray, where: str) -> None:
+    """DataError at the first time stamp that repeats or goes backwards."""
+    dt_us = np.diff(t_us)
+    if np.any(dt_us <= 0):
+        i = int(np.argmax(dt_us <= 0))
+        what = "repeats" if dt_us[i] == 0 else "goes backwards"
+        raise DataError(
+            f"time stamp {what}: {_stamp_text(t_us[i + 1])!r} after {_stamp_text(t_us[i])!r}",
+            where=f"{where}, row {rows[i + 1]}",
+        )
+
+
+def _slow_block(block: bytes, first_row: int, ncol: int, kinds: list[str], names: list[str],
+                where: str) -> csvparse.Block:
+    """One block parsed record by record (quotes, blanks, UTF-8 text, or a problem to report)."""
+    lines = _decode(block).split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    lines = [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+    reader = csv.reader(lines)
+    records: list[list[str]] = []
+    rows: list[int] = []
+    try:
+        for rec in reader:
+            records.append(rec)
+            rows.append(first_row + reader.line_num - 1)
+    except csv.Error as exc:
+        what = (
+            f"a field longer than {csv.field_size_limit() // 1024} KiB, which no TSO value is"
+            if "field larger" in str(exc)
+            else f"cannot be read as CSV ({exc})"
+        )
+        raise DataError(
+            f"{what}: is it a TSO log, and the right file?",
+            where=f"{where}, row {first_row + reader.line_num - 1}",
+        ) from None
+    cells, row_arr = _data_records(records, ncol, where, rows)
+    cols = list(zip(*cells)) if cells else [()] * ncol
+    stamps = [s.strip() for s in cols[0]]
+    t_us = _parse_timestamps(stamps, row_arr, where)
+    values: list[np.ndarray | None] = []
+    texts: list[np.ndarray] = []
+    for name, kind, col in zip(names, kinds, cols[1:]):
+        vals = list(col)
+        texts.append(np.array([v.strip().encode("utf-8") for v in vals], dtype="S") if vals
+                     else np.empty(0, "S1"))
+        values.append(None if kind == "text" else _float_column(vals, name, row_arr, where, kind == "strict"))
+    return csvparse.Block(row_arr, t_us, np.array([s.encode() for s in stamps], dtype="S"), values, texts)
+
+
+@dataclass(frozen=True, eq=False)
+class Table:
+    """A TSO CSV file parsed: one entry per data record, as in the file (no gap handling yet)."""
+
+    header: Header
+    rows: np.ndarray
+    """File row of each record (row 1 is the header)."""
+    t_us: np.ndarray
+    """Time stamps [µs since 1970-01-01], int64, strictly increasing."""
+    columns: dict[str, np.ndarray]
+    """Canonical name (without DateTime) -> float64 array or text array."""
+
+    def stamp(self, i: int) -> str:
+        """The time stamp of record ``i`` as ``YYYYMMDDThhmmss.nnn`` (for messages)."""
+        return _stamp_text(int(self.t_us[i]))
+
+
+def _column_kinds(names: list[str], required: tuple[str, ...]) -> list[str]:
+    """"text" (identifier columns), "strict" (signal and required columns: finite numbers) or "num"
+    (numbers with empty cells allowed, or text if any value is not a number)."""
+    return [
+        "text" if n in TEXT_COLUMNS else "strict" if n in SIGNAL_COLUMNS or n in required else "num"
+        for n in names
+    ]
+
+
+def parse_table(
+    source: str | bytes | Path | Iterable[bytes],
+    *,
+    where: str,
+    required: tuple[str, ...] = REQUIRED_COLUMNS,
+    min_samples: int = 20,
+    min_duration_s: float = 10.0,
+) -> Table:
+    """The parsing core: a TSO CSV file (a path, read in bounded chunks, its text or bytes, or an iterable
+    of byte chunks) -> :class:`Table`.
+
+    Blocks of lines are parsed vectorised (:mod:`fcrlive.tso.csvparse`); a block that the fast path does
+    not take is parsed record by record, which reports the first problem with its row. Checks: the header
+    (:func:`_parse_header`); in each record, in file order, the number of fields, the time stamp and the
+    values (``SIGNAL_COLUMNS`` and ``required`` finite numbers by the strict ASCII grammar); time stamps
+    strictly increasing; at least ``min_samples`` records spanning at least ``min_duration_s`` [s].
+    DataError(where="WHERE, row N" or "WHERE") otherwise.
+    """
+    blocks = csvparse.blocks(_chunks(source, where), where)
+    first = next(blocks, None)
+    if first is None:
+        raise DataError("empty file: no header line", where=where)
+    header = _parse_header(_read_header_line(first[1], where), required, where)
+    ncol = len(header.names)
+    names = header.names[1:]
+    kinds = _column_kinds(names, required)
+    want_text = [k != "strict" for k in kinds]
+    rows: list[np.ndarray] = []
+    times: list[np.ndarray] = []
+    values: list[list[np.ndarray | None]] = [[] for _ in names]
+    texts: list[list[np.ndarray]] = [[] for _ in names]
+    last: tuple[int, int] | None = None  # (t_us, row) of the previous block's last record
+    for row0, block in blocks:
+        b = csvparse.parse_block(block, row0, ncol, want_text)
+        if b is not None and any(
+            k == "strict" and (v is None or not np.isfinite(v).all()) for k, v in zip(kinds, b.values)
+        ):
+            b = None  # let the slow path name the bad value
+        if b is None:
+            b = _slow_block(block, row0, ncol, kinds, names, where)
+        elif b.t_us is None:
+            b.t_us = _parse_timestamps([s.decode("ascii") for s in b.stamps], b.rows, where)
+        if b.rows.size == 0:
+            continue
+        if last is not None:
+            _check_time_order(np.array([last[0], b.t_us[0]]), np.array([last[1], b.rows[0]]), where)
+        _check_time_order(b.t_us, b.rows, where)
+        last = (int(b.t_us[-1]), int(b.rows[-1]))
+        rows.append(b.rows)
+        times.append(b.t_us)
+        for j, kind in enumerate(kinds):
+            values[j].append(b.values[j])
+            if kind != "strict":
+                texts[j].append(b.texts[j])
+    n = sum(r.size for r in rows)
+    if n < max(min_samples, 2):
+        raise DataError(f"log too short: {n} samples, need at least {max(min_samples, 2)}", where=where)
+    t_us = np.concatenate(times)
+    duration = (t_us[-1] - t_us[0]) / 1e6
+    if duration < min_duration_s:
+        raise DataError(f"log too short: {duration:.3f} s, need at least {min_duration_s:g} s", where=where)
+    columns: dict[str, np.ndarray] = {}
+    for j, (name, kind) in enumerate(zip(names, kinds)):
+        if kind != "text" and all(v is not None for v in values[j]):
+            columns[name] = np.concatenate(values[j])
+        else:
+            raw = np.concatenate(texts[j])
+            columns[name] = np.char.strip(np.char.decode(raw, "utf-8", errors="replace"))
+        values[j] = texts[j] = []  # free as we go
+    return Table(header=header, rows=np.concatenate(rows), t_us=t_us, columns=columns)
+
+
+def _tso_name(path: Path) -> TsoFileName | None:
+    """The parsed file name when it follows the TSO naming convention, else None."""
+    try:
+        return parse_tso_filename(path.name)
+    except DataError:
+        return None
 
 
 def read_log(
@@ -460,199 +680,90 @@ def read_log(
     """
     path = Path(path)
     where = str(path)
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise DataError(f"cannot read the file: {exc.strerror or exc}", where=where) from None
-    text = _decode(raw)
-    lines = text.split("\n")
-    if lines and lines[-1] == "":
-        lines.pop()
-    lines = [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
-    if not lines or not lines[0].strip():
-        raise DataError("empty file: no header line", where=where)
-    if ";" in lines[0] and "," not in lines[0]:
-        raise DataError(
-            "semicolon separated; the TSO format is comma separated with '.' decimals", where=where
-        )
-
-    records = list(csv.reader(lines))
-    header = [h for h in records[0]]
-    trailing_comma = len(header) > 1 and header[-1].strip() == ""
-    if trailing_comma:
-        header = header[:-1]
-    header, period_s = _strip_period(header, where)
-    names: list[str] = []
-    units: dict[str, str] = {}
-    for h in header:
-        name, unit = _canonical_header(h)
-        if not name:
-            raise DataError("empty column header", where=f"{where}, row 1")
-        if name in names:
-            raise DataError(f"column {name} appears twice in the header", where=f"{where}, row 1")
-        names.append(name)
-        if unit is not None:
-            units[name] = unit
-    if names[0] != "DateTime":
-        raise DataError(
-            f"first column must be DateTime, found {header[0].strip()!r}", where=f"{where}, row 1"
-        )
-    missing = [c for c in required if c not in names]
-    if missing:
-        raise DataError(
-            f"missing required column{'s' if len(missing) > 1 else ''} {', '.join(missing)} "
-            f"(found {', '.join(names[1:]) or 'none'})",
-            where=where,
-        )
-
-    ncol = len(names)
-    cells: list[list[str]] = []
-    row_numbers: list[int] = []
-    for i, rec in enumerate(records[1:], start=2):
-        if not rec or (len(rec) == 1 and not rec[0].strip()):
-            continue  # blank line: harmless
-        if len(rec) == ncol + 1 and not rec[-1].strip():
-            rec = rec[:-1]  # trailing comma
-        if len(rec) != ncol:
-            hint = " (decimal commas? the format uses '.')" if len(rec) > ncol else ""
-            raise DataError(
-                f"row has {len(rec)} fields, the header has {ncol}{hint}", where=f"{where}, row {i}"
-            )
-        cells.append(rec)
-        row_numbers.append(i)
-    rows = np.asarray(row_numbers, dtype=np.int64)
-    n = len(cells)
-    if n < max(min_samples, 2):
-        raise DataError(f"log too short: {n} samples, need at least {max(min_samples, 2)}", where=where)
-
-    cols_text = list(zip(*cells))
-    stamps = [s.strip() for s in cols_text[0]]
-    t_us = _parse_timestamps(stamps, rows, where)
-    dt_us = np.diff(t_us)
-    if np.any(dt_us <= 0):
-        i = int(np.argmax(dt_us <= 0))
-        what = "repeats" if dt_us[i] == 0 else "goes backwards"
-        raise DataError(
-            f"time stamp {what}: {stamps[i + 1]!r} after {stamps[i]!r}", where=f"{where}, row {rows[i + 1]}"
-        )
-    duration = (t_us[-1] - t_us[0]) / 1e6
-    if duration < min_duration_s:
-        raise DataError(f"log too short: {duration:.3f} s, need at least {min_duration_s:g} s", where=where)
-
-    columns: dict[str, np.ndarray] = {}
-    for name, values in zip(names[1:], cols_text[1:]):
-        values = list(values)
-        if name in TEXT_COLUMNS:
-            columns[name] = np.array([v.strip() for v in values], dtype=str)
-            continue
-        strict = name in SIGNAL_COLUMNS or name in required
-        arr = _float_column(values, name, rows, where, strict)
-        columns[name] = arr if arr is not None else np.array([v.strip() for v in values], dtype=str)
-
-    fname: TsoFileName | None
-    notes: list[str] = []
-    try:
-        fname = parse_tso_filename(path.name)
-    except DataError:
-        fname = None
-    timezone = fname.timezone if fname else "UTC"
-
-    log = _regularise(t_us, columns, rows, where=where, max_fill=max_fill, jitter=jitter, stamps=stamps)
-    t_s, columns, filled, rows2, segments, gaps, sample_s = log
-    if fname is not None:
-        if abs(fname.sample_s - sample_s) > 0.01 * fname.sample_s + 1e-3:
-            notes.append(f"file name says {fname.sample_s:g} s sampling, the time stamps say {sample_s:g} s")
-        if period_s is not None and fname.period_s is not None and fname.period_s != period_s:
-            notes.append(f"file name says period {fname.period_s:g} s, the headers say {period_s:g} s")
-    for g in gaps:
-        notes.append(str(g))
+    table = parse_table(
+        path,
+        where=where,
+        required=required,
+        min_samples=min_samples,
+        min_duration_s=min_duration_s,
+    )
+    fname = _tso_name(path)
+    grid = _regularise(table, where=where, max_fill=max_fill, jitter=jitter)
     return TsoLog(
-        t_s=t_s,
-        start=_us_to_datetime(t_us[0]),
-        columns=columns,
-        period_s=period_s,
-        units=units,
-        timezone=timezone,
+        t_s=grid.samples.t,
+        start=_us_to_datetime(table.t_us[0]),
+        columns=grid.samples.columns,
+        period_s=table.header.period_s,
+        units=table.header.units,
+        timezone=fname.timezone if fname else "UTC",
         path=path,
-        sample_s=sample_s,
-        filled=filled,
-        segments=segments,
-        gaps=gaps,
-        rows=rows2,
+        sample_s=grid.sample_s,
+        filled=grid.samples.filled,
+        segments=grid.samples.segments,
+        gaps=grid.gaps,
+        rows=grid.rows,
         name=fname,
-        notes=tuple(notes),
+        notes=_notes(fname, table.header.period_s, grid),
     )
 
 
-def _regularise(t_us, columns, rows, *, where, max_fill, jitter, stamps):
-    """Check the sample interval, report gaps, fill short ones, split at long ones."""
-    n = t_us.shape[0]
+@dataclass(frozen=True, eq=False)
+class _Grid:
+    """A table on its sampling grid: short gaps filled, segments split at long ones."""
+
+    samples: Filled
+    rows: np.ndarray
+    """File row of each sample, 0 for the filled ones."""
+    gaps: tuple[Gap, ...]
+    sample_s: float
+
+
+def _regularise(table: Table, *, where: str, max_fill: int, jitter: float) -> _Grid:
+    """Check the sample interval, report gaps, fill short ones, split at long ones (the gap rule and the
+    filling of :mod:`fcrlive.signals`)."""
+    t_us, rows = table.t_us, table.rows
     dt = np.diff(t_us).astype(np.float64)
-    ts = float(np.median(dt))
+    ts = median_interval(t_us)
     tol = max(jitter * ts, 1000.0)  # time stamps have 1 ms resolution
-    is_gap = dt > 1.5 * ts
-    irregular = ~is_gap & (np.abs(dt - ts) > tol)
+    irregular = ~is_gap(dt, ts) & (np.abs(dt - ts) > tol)
     if np.any(irregular):
         i = int(np.argmax(irregular))
         raise DataError(
-            f"non-uniform sample interval: {dt[i] / 1e6:.3f} s from {stamps[i]!r} to {stamps[i + 1]!r}, "
-            f"the median is {ts / 1e6:.3f} s (tolerance ±{tol / 1e6:.3f} s; gaps are > 1.5x the median)",
+            f"non-uniform sample interval: {dt[i] / 1e6:.3f} s from {table.stamp(i)!r} to "
+            f"{table.stamp(i + 1)!r}, "
+            f"the median is {ts / 1e6:.3f} s (tolerance ±{tol / 1e6:.3f} s; gaps are > {GAP_FACTOR:g}x the "
+            "median)",
             where=f"{where}, row {rows[i + 1]}",
         )
-    gaps: list[Gap] = []
-    fills: list[tuple[int, int]] = []  # (interval index i, number of sub-intervals k)
-    breaks: list[int] = []  # interval indices where the log is split
-    for i in np.flatnonzero(is_gap):
-        i = int(i)
-        k = round(dt[i] / ts)
-        on_grid = abs(dt[i] - k * ts) <= tol
-        fill = on_grid and (k - 1) <= max_fill
-        gaps.append(
-            Gap(
-                row=int(rows[i + 1]),
-                start=_us_to_datetime(t_us[i]),
-                t_s=(t_us[i] - t_us[0]) / 1e6,
-                length_s=dt[i] / 1e6,
-                missing=k - 1,
-                filled=fill,
-            )
+    found = find_gaps(t_us, ts=ts, max_fill=max_fill, tol=tol)
+    gaps = tuple(
+        Gap(
+            row=int(rows[i + 1]),
+            start=_us_to_datetime(t_us[i]),
+            t_s=(t_us[i] - t_us[0]) / 1e6,
+            length_s=dt[i] / 1e6,
+            missing=int(m),
+            filled=bool(f),
         )
-        if fill:
-            fills.append((i, k))
-        else:
-            breaks.append(i)
-
+        for i, m, f in zip(found.index, found.missing, found.filled)
+    )
     t_rel = (t_us - t_us[0]).astype(np.float64) / 1e6
-    if fills:
-        pieces: list[np.ndarray] = []
-        prev = 0
-        for i, k in fills:
-            pieces.append(np.arange(prev, i + 1, dtype=np.float64))
-            pieces.append(i + np.arange(1, k, dtype=np.float64) / k)
-            prev = i + 1
-        pieces.append(np.arange(prev, n, dtype=np.float64))
-        q = np.concatenate(pieces)
-        idx = np.arange(n, dtype=np.float64)
-        filled = q != np.floor(q)
-        base = np.floor(q).astype(np.int64)
-        t_rel = np.interp(q, idx, t_rel)
-        new_cols = {}
-        for name, col in columns.items():
-            if col.dtype.kind == "f":
-                new_cols[name] = np.interp(q, idx, col)
-            else:
-                new_cols[name] = col[base]  # identifiers: hold the previous value
-        columns = new_cols
-        rows = np.where(filled, 0, rows[base])
-        new_index = np.searchsorted(q, np.arange(n, dtype=np.float64))
-    else:
-        filled = np.zeros(n, dtype=bool)
-        new_index = np.arange(n)
-    total = t_rel.shape[0]
-    cuts = [int(new_index[i + 1]) for i in breaks]
-    bounds = [0, *cuts, total]
-    segments = tuple(pairwise(bounds))
-    return t_rel, columns, filled, rows, segments, tuple(gaps), ts / 1e6
+    out = fill_gaps(t_rel, table.columns, found)
+    return _Grid(samples=out, rows=np.where(out.filled, 0, rows[out.source]), gaps=gaps, sample_s=ts / 1e6)
+
+
+def _notes(fname: TsoFileName | None, period_s: float | None, grid: _Grid) -> tuple[str, ...]:
+    """Where the file name and the data disagree, and every gap."""
+    notes: list[str] = []
+    if fname is not None:
+        if abs(fname.sample_s - grid.sample_s) > 0.01 * fname.sample_s + 1e-3:
+            notes.append(
+                f"file name says {fname.sample_s:g} s sampling, the time stamps say {grid.sample_s:g} s"
+            )
+        if period_s is not None and fname.period_s is not None and fname.period_s != period_s:
+            notes.append(f"file name says period {fname.period_s:g} s, the headers say {period_s:g} s")
+    notes.extend(str(g) for g in grid.gaps)
+    return tuple(notes)
 
 
 # --- writing ----------------------------------------------------------------------------------------
@@ -687,9 +798,8 @@ def write_log(
     if np.any(np.diff(ms) <= 0):
         raise ValueError("samples closer than 1 ms cannot be written with millisecond time stamps")
     start_ms = np.datetime64(log.start.replace(tzinfo=None), "ms")
-    iso = np.datetime_as_string(start_ms + ms.astype("timedelta64[ms]"), unit="ms")
-    stamps = np.char.replace(np.char.replace(iso, "-", ""), ":", "")
-    out_cols: list[np.ndarray] = [stamps]
+    cols: list[np.ndarray] = []
+    fmts: list[str] = ["%s"]
     for name, col in log.columns.items():
         col = col[keep]
         if col.dtype.kind in "fiub":
@@ -697,15 +807,27 @@ def write_log(
             values = np.asarray(col, dtype=np.float64)
             if not np.all(np.isfinite(values)):
                 raise ValueError(f"column {name} has non-finite values; the TSO format cannot hold them")
-            out_cols.append(np.char.mod(f"%.{int(d)}f", values))
+            cols.append(values)
+            fmts.append(f"%.{int(d)}f")
         else:
             strs = np.asarray(col, dtype=str)
             for s in strs:
                 if not s.isascii() or any(ch in s for ch in ',"\r\n'):
                     raise ValueError(f"column {name}: value {s!r} cannot be written (ASCII, no comma)")
-            out_cols.append(strs)
-    lines = [",".join(f"{h}{suffix}" for h in headers)]
-    lines.extend(",".join(r) for r in zip(*(c.tolist() for c in out_cols)))
-    data = ("\r\n".join(lines) + "\r\n").encode("ascii")
-    path.write_bytes(data)
+            cols.append(strs)
+            fmts.append("%s")
+    row_fmt = ",".join(fmts) + "\r\n"
+    # In chunks of rows: a day of samples as one list of Python strings would take gigabytes.
+    with path.open("wb") as f:
+        f.write((",".join(f"{h}{suffix}" for h in headers) + "\r\n").encode("ascii"))
+        for lo in range(0, ms.size, _WRITE_ROWS):
+            hi = min(lo + _WRITE_ROWS, ms.size)
+            iso = np.datetime_as_string(start_ms + ms[lo:hi].astype("timedelta64[ms]"), unit="ms")
+            stamps = np.char.replace(np.char.replace(iso, "-", ""), ":", "")
+            parts = [stamps.tolist(), *(c[lo:hi].tolist() for c in cols)]
+            f.write("".join(row_fmt % r for r in zip(*parts)).encode("ascii"))
     return path
+
+
+_WRITE_ROWS = 50_000
+"""Rows formatted and written at a time by :func:`write_log`."""

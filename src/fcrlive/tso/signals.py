@@ -1,4 +1,5 @@
-"""Map a TSO log to the paper's Fig. 1 signals (pu on the machine base) and a simulation back to a log.
+"""Map a TSO log to the paper's Fig. 1 signals (:class:`fcrlive.signals.PlantSignals`, pu on the machine
+base) and a simulation back to a log.
 
 Signals, with f0 the nominal frequency [Hz] and rated_mw the unit's rating [MW]:
 
@@ -17,7 +18,6 @@ Detrending is left to the identification; nothing here removes means other than 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
@@ -25,55 +25,8 @@ import numpy as np
 
 from fcrlive.constants import F0_HZ
 from fcrlive.errors import DataError
+from fcrlive.signals import EXCITATION_THRESHOLD_HZ, PlantSignals, is_excited
 from fcrlive.tso.csvlog import TsoLog
-
-EXCITATION_THRESHOLD_HZ = 1e-3
-"""Peak-to-peak of GridFreq − ApplFreqSig [Hz] above which the log counts as excited (r ≠ 0)."""
-
-
-@dataclass(frozen=True, eq=False)
-class PlantSignals:
-    """The paper's sampled signals from one log, in pu on the machine base (frequency in pu of f0)."""
-
-    t: np.ndarray
-    """Time since the first sample [s]."""
-    Ts: float
-    """Nominal sample interval [s]."""
-    u: np.ndarray
-    """Electrical power deviation ΔPe [pu machine base]."""
-    y: np.ndarray
-    """Measured frequency deviation [pu of f0] (not detrended)."""
-    r: np.ndarray
-    """Excitation [pu of f0]: (GridFreq − ApplFreqSig)/f0, zeros when ApplFreqSig is not logged."""
-    epsilon: np.ndarray
-    """Control error r − y [pu of f0]."""
-    c: np.ndarray | None
-    """Controller output [pu], None if ContOutSig is not logged."""
-    a: np.ndarray | None
-    """Guide-vane position [pu], None if GuideVane is not logged."""
-    rated_mw: float
-    f0: float
-    """Nominal frequency [Hz]."""
-    p0_mw: float
-    """Power subtracted from InsAcPow to form u [MW]."""
-    has_excitation: bool
-    """True when ApplFreqSig is logged and differs from GridFreq (peak-to-peak above the threshold)."""
-    filled: np.ndarray
-    """True for samples interpolated across a short gap."""
-    segments: tuple[tuple[int, int], ...]
-    """Half-open gap-free index ranges; identification must not run a filter across a boundary."""
-    period_s: float | None = None
-    """Sine-test period [s] of the source log, None for operation logs."""
-    sources: tuple[str, ...] = ()
-    notes: tuple[str, ...] = ()
-
-    @property
-    def valid(self) -> np.ndarray:
-        """True for measured samples (not filled)."""
-        return ~self.filled
-
-    def __len__(self) -> int:
-        return int(self.t.shape[0])
 
 
 def plant_signals(
@@ -114,7 +67,7 @@ def plant_signals(
         fa = _numeric(log, "ApplFreqSig")
         r = (f - fa) / f0
         epsilon = (f0 - fa) / f0
-        has_excitation = bool(np.ptp(f - fa) > excitation_threshold_hz)
+        has_excitation = is_excited(f - fa, excitation_threshold_hz)
         if not has_excitation:
             notes.append(
                 f"ApplFreqSig follows GridFreq within {excitation_threshold_hz * 1e3:g} mHz: no excitation"

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from fcrlive.daemon.registers import RegisterMap, encode_point, plan_reads
+from fcrlive.modbus.registers import RegisterMap, encode_point, plan_reads
 
 _FC = {"input": 4, "holding": 3}
 

@@ -2,7 +2,8 @@
 
 A register map is what Telegraf / Home Assistant users write: per point a table (input = FC4,
 holding = FC3), a start address, a type (int16 … float64), ``value = raw·scale + offset`` and the
-device's word and byte order. The map file format is the one of ``sim_device/registers.toml``::
+device's word and byte order. The map file format is the one of ``sim_device/registers.toml``
+(read and validated by :mod:`fcrlive.modbus.mapfile`)::
 
     unit_id = 1
     word_order = "big"    # "big": most significant 16-bit word first
@@ -12,7 +13,9 @@ device's word and byte order. The map file format is the one of ``sim_device/reg
     scale = 1.0; offset = 0.0; unit = "pu"; writable = false; description = "..."
 
 Reads are grouped into contiguous blocks per table (at most 125 registers, the Modbus limit for
-FC3/FC4) so one request fetches many points.
+FC3/FC4) so one request fetches many points. The daemon's poller and the excitation writer use the
+per-block codec (:func:`decode_block`, :func:`encode_point`); a device serving the map (the simulated
+governor) uses the whole-table one (:meth:`RegisterMap.encode_block`, :meth:`RegisterMap.decode_block`).
 """
 
 from __future__ import annotations
@@ -20,9 +23,14 @@ from __future__ import annotations
 import itertools
 import math
 import struct
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import Literal
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Literal
+
+from fcrlive.errors import ConfigError
+
+if TYPE_CHECKING:  # ringlayout takes MAX_READ_REGISTERS from here
+    from fcrlive.modbus.ringlayout import BufferLayout
 
 Table = Literal["input", "holding"]
 RegType = Literal["int16", "uint16", "int32", "uint32", "float32", "float64"]
@@ -72,24 +80,131 @@ class RegisterPoint:
 
 @dataclass(frozen=True)
 class RegisterMap:
-    """A device's points and its word/byte order; ``unit_id`` is the Modbus device id."""
+    """A device's points and its word/byte order; ``unit_id`` is the Modbus device id.
+
+    Build one from a file with :func:`fcrlive.modbus.mapfile.load_register_map` (validated: names,
+    tables, overlaps); the constructor itself does not check.
+    """
 
     points: tuple[RegisterPoint, ...]
     unit_id: int = 1
     word_order: Order = "big"
     byte_order: Order = "big"
+    acquisition: Literal["polled", "buffered"] = "polled"
+    """"buffered": read the device's ring buffer of controller samples (docs/buffered-acquisition.md)."""
+    buffer: BufferLayout | None = None
+    """The ring buffer's layout when the device has one (``[buffer]`` of the map file)."""
 
+    # ------------------------------------------------------------------ look-up
     def point(self, name: str) -> RegisterPoint:
         """The point called ``name`` (KeyError if absent)."""
         for p in self.points:
             if p.name == name:
                 return p
-        raise KeyError(name)
+        raise KeyError(f"no point named {name!r} in the register map")
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.names
 
     @property
     def names(self) -> tuple[str, ...]:
         """Point names in map order."""
         return tuple(p.name for p in self.points)
+
+    def table(self, table: Table) -> tuple[RegisterPoint, ...]:
+        """Points of one table, by address."""
+        return tuple(sorted((p for p in self.points if p.table == table), key=lambda p: p.address))
+
+    def span(self, table: Table) -> tuple[int, int]:
+        """(first address, register count) covering every point of ``table``."""
+        pts = self.table(table)
+        if not pts:
+            raise KeyError(f"no points in table {table!r}")
+        start = pts[0].address
+        return start, max(p.end for p in pts) - start
+
+    def with_word_order(self, word_order: Order) -> RegisterMap:
+        if word_order not in ("big", "little"):
+            raise ConfigError(f"word_order must be 'big' or 'little', not {word_order!r}")
+        return replace(self, word_order=word_order)
+
+    # ----------------------------------------------------------- conversions
+    def encode(self, point: RegisterPoint | str, value: float) -> list[int]:
+        """Engineering value -> registers (scale/offset, type, word and byte order).
+
+        ValueError (naming the point) for a non-finite value of an integer type or one out of its range.
+        """
+        p = self.point(point) if isinstance(point, str) else point
+        raw: float | int = (value - p.offset) / p.scale if (p.scale != 1.0 or p.offset != 0.0) else value
+        if p.type.startswith("float"):
+            return encode_raw(float(raw), p.type, self.word_order, self.byte_order)
+        if not math.isfinite(raw):
+            raise ValueError(f"{p.name}: cannot encode {value!r} as {p.type}")
+        try:
+            return encode_raw(raw, p.type, self.word_order, self.byte_order)
+        except struct.error:
+            raise ValueError(f"{p.name}: {value!r} out of range for {p.type}") from None
+
+    def decode(self, point: RegisterPoint | str, regs: list[int]) -> float | int:
+        """Registers (exactly ``point.words`` of them) -> engineering value (the raw int when unscaled)."""
+        p = self.point(point) if isinstance(point, str) else point
+        if len(regs) != p.words:
+            raise ValueError(f"{p.name}: expected {p.words} registers, got {len(regs)}")
+        raw = decode_raw(regs, p.type, self.word_order, self.byte_order)
+        if p.scale == 1.0 and p.offset == 0.0:
+            return raw
+        return raw * p.scale + p.offset
+
+    def decode_block(self, table: Table, start: int, regs: list[int]) -> dict[str, float | int]:
+        """Decode every point of ``table`` lying wholly inside ``regs`` read from address ``start``."""
+        out: dict[str, float | int] = {}
+        stop = start + len(regs)
+        for p in self.table(table):
+            if p.address >= start and p.end <= stop:
+                out[p.name] = self.decode(p, regs[p.address - start : p.end - start])
+        return out
+
+    def encode_block(self, table: Table, values: dict[str, float]) -> tuple[int, list[int]]:
+        """(start, registers) of the whole ``table`` span, gaps zero; points missing from ``values`` are 0."""
+        start, count = self.span(table)
+        regs = [0] * count
+        for p in self.table(table):
+            regs[p.address - start : p.end - start] = self.encode(p, values.get(p.name, 0))
+        return start, regs
+
+    # -------------------------------------------------------------- writing
+    def to_toml(self) -> str:
+        """The map in the registers.toml format (round-trips through the map file loader)."""
+        lines = [
+            f"unit_id = {self.unit_id}",
+            f'word_order = "{self.word_order}"',
+            f'byte_order = "{self.byte_order}"',
+            f'acquisition = "{self.acquisition}"',
+        ]
+        if self.buffer is not None:
+            b = self.buffer
+            lines += ["", "[buffer]", f"header_address = {b.header_address}",
+                      f"slots_address = {b.slots_address}", f"slots = {b.slots}",
+                      "fields = [" + ", ".join(_q(f) for f in b.fields) + "]"]
+        for p in self.points:
+            lines += [
+                "",
+                "[[points]]",
+                f"name = {_q(p.name)}",
+                f"table = {_q(p.table)}",
+                f"address = {p.address}",
+                f"type = {_q(p.type)}",
+                f"scale = {float(p.scale)!r}",
+                f"offset = {float(p.offset)!r}",
+                f"unit = {_q(p.unit)}",
+                f"writable = {'true' if p.writable else 'false'}",
+                f"description = {_q(p.description)}",
+            ]
+        return "\n".join(lines) + "\n"
+
+
+def _q(s: str) -> str:
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
 @dataclass(frozen=True)
@@ -202,12 +317,3 @@ def decode_block(block: ReadBlock, registers: Sequence[int], word_order: Order =
             out[p.name] = math.nan
     return out
 
-
-def register_map_from_dict(data: Mapping) -> RegisterMap:
-    """Build a :class:`RegisterMap` from already validated plain data (see ``config.RegisterMapModel``)."""
-    return RegisterMap(
-        points=tuple(RegisterPoint(**dict(p)) for p in data["points"]),
-        unit_id=int(data.get("unit_id", 1)),
-        word_order=data.get("word_order", "big"),
-        byte_order=data.get("byte_order", "big"),
-    )

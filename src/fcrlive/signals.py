@@ -1,0 +1,255 @@
+"""The paper's sampled signals (:class:`PlantSignals`) and the conditioning every data source shares:
+the sample interval, gaps, segments, filling and resampling.
+
+Pure: numpy arrays in, frozen dataclasses out, no I/O. The sources are the TSO CSV reader
+(:mod:`fcrlive.tso.csvlog`, whose log-to-signals mapping is :mod:`fcrlive.tso.signals`), the daemon's
+window store (:mod:`fcrlive.daemon.store`) and its identification plug-in
+(:mod:`fcrlive.daemon.identify_plugin`).
+
+**The gap rule**, one for every source: an interval between two consecutive samples is a gap when it is
+longer than ``GAP_FACTOR`` = 1.5 times the nominal (median) sample interval. 1.5 is halfway between one
+interval (nothing missing) and two (one sample missing), so the first missing sample is caught while
+timing jitter of up to half an interval is not taken for a loss; a source that wants the regular
+intervals tighter than that checks it itself (the CSV reader refuses intervals off the median by more
+than its jitter tolerance). What happens at a gap is the caller's choice, ``max_fill``: gaps of at most
+that many missing samples are filled by linear interpolation, longer ones split the data into segments
+that no filter may run across. The CSV reader fills up to 3 samples (on the sampling grid); the
+daemon's identification fills 1 (its former "2.5 intervals" split is exactly this rule with one sample
+filled); the store reports every gap in the window's data quality. Time that does not advance (a
+device's clock set back by a restart) always splits.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from itertools import pairwise
+
+import numpy as np
+
+GAP_FACTOR = 1.5
+"""An interval longer than this many nominal (median) intervals is a gap (module docstring)."""
+
+EXCITATION_THRESHOLD_HZ = 1e-3
+"""Peak-to-peak of the excitation (GridFreq − ApplFreqSig in a log, the written or applied excitation
+in a daemon window) [Hz] above which the data count as excited (r ≠ 0)."""
+
+
+def is_excited(excitation_hz: np.ndarray, threshold_hz: float = EXCITATION_THRESHOLD_HZ) -> bool:
+    """True when the excitation [Hz] varies by more than ``threshold_hz`` peak to peak."""
+    return bool(np.ptp(excitation_hz) > threshold_hz)
+
+
+@dataclass(frozen=True, eq=False)
+class PlantSignals:
+    """The paper's sampled signals (Fig. 1) from one source (a log, a daemon window, a simulation), in pu
+    on the machine base (frequency in pu of f0)."""
+
+    t: np.ndarray
+    """Time since the first sample [s]."""
+    Ts: float
+    """Nominal sample interval [s]."""
+    u: np.ndarray
+    """Electrical power deviation ΔPe [pu machine base]."""
+    y: np.ndarray
+    """Measured frequency deviation [pu of f0] (not detrended)."""
+    r: np.ndarray
+    """Excitation [pu of f0]: in a log (GridFreq − ApplFreqSig)/f0; zeros when there is none."""
+    epsilon: np.ndarray
+    """Control error r − y [pu of f0]."""
+    c: np.ndarray | None
+    """Controller output [pu], None if not measured (ContOutSig in a log)."""
+    a: np.ndarray | None
+    """Guide-vane position [pu], None if not measured (GuideVane in a log)."""
+    rated_mw: float
+    f0: float
+    """Nominal frequency [Hz]."""
+    p0_mw: float
+    """Power subtracted from the measured power (InsAcPow in a log) to form u [MW]."""
+    has_excitation: bool
+    """True when the excitation varies by more than ``EXCITATION_THRESHOLD_HZ`` peak to peak (in a log:
+    ApplFreqSig is logged and differs from GridFreq)."""
+    filled: np.ndarray
+    """True for samples interpolated across a short gap."""
+    segments: tuple[tuple[int, int], ...]
+    """Half-open gap-free index ranges; identification must not run a filter across a boundary."""
+    period_s: float | None = None
+    """Sine-test period [s] of the source log, None for operation logs."""
+    sources: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+
+    @property
+    def valid(self) -> np.ndarray:
+        """True for measured samples (not filled)."""
+        return ~self.filled
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+
+# --- sample interval and gaps -----------------------------------------------------------------------
+
+
+def median_interval(t: np.ndarray) -> float:
+    """Nominal sample interval: the median of the intervals that advance [unit of ``t``]; NaN if none."""
+    dt = np.diff(t)
+    pos = dt[dt > 0]
+    return float(np.median(pos)) if pos.size else math.nan
+
+
+def is_gap(dt: np.ndarray, ts: float) -> np.ndarray:
+    """Mask of the intervals ``dt`` that are gaps under the gap rule (``dt > GAP_FACTOR·ts``)."""
+    return dt > GAP_FACTOR * ts
+
+
+def segments_between(breaks: np.ndarray, n: int) -> tuple[tuple[int, int], ...]:
+    """Half-open index ranges of ``n`` samples split after each interval index in ``breaks``."""
+    bounds = [0, *(int(i) + 1 for i in breaks), n]
+    return tuple(pairwise(bounds))
+
+
+@dataclass(frozen=True, eq=False)
+class Gaps:
+    """The gaps of a time axis under the gap rule, and which of them are filled or split."""
+
+    ts: float
+    """Nominal sample interval [unit of the time axis]."""
+    index: np.ndarray
+    """Interval index i of each gap (between samples i and i + 1)."""
+    missing: np.ndarray
+    """Samples missing in each gap at the nominal interval."""
+    filled: np.ndarray
+    """Per gap: short enough (and on the grid, when asked) to be filled by interpolation."""
+    breaks: np.ndarray
+    """Interval indices where the data are split: unfilled gaps and time that does not advance."""
+    n: int
+    """Samples on the time axis."""
+
+    @property
+    def segments(self) -> tuple[tuple[int, int], ...]:
+        """Half-open gap-free index ranges of the samples (before any filling)."""
+        return segments_between(self.breaks, self.n)
+
+
+def find_gaps(
+    t: np.ndarray, *, ts: float | None = None, max_fill: int = 0, tol: float | None = None
+) -> Gaps:
+    """The gaps of the time axis ``t`` (any unit; int64 microseconds or float seconds).
+
+    ``ts``: nominal interval, default :func:`median_interval`. ``max_fill``: gaps of at most this many
+    missing samples are filled. ``tol``: when given, a gap is filled only if its length is a whole number
+    of intervals within ``tol`` (a logger on a grid that lost samples); None for sources whose samples
+    have arrival jitter and are resampled anyway.
+    """
+    dt = np.diff(t).astype(np.float64)
+    if ts is None:
+        ts = median_interval(t)
+    index = np.flatnonzero(is_gap(dt, ts))
+    k = np.rint(dt[index] / ts).astype(np.int64)
+    missing = k - 1
+    filled = missing <= max_fill
+    if tol is not None:
+        filled &= np.abs(dt[index] - k * ts) <= tol
+    split = np.zeros(dt.shape, dtype=bool)
+    split[index[~filled]] = True
+    split |= dt <= 0
+    return Gaps(
+        ts=float(ts), index=index, missing=missing, filled=filled, breaks=np.flatnonzero(split),
+        n=int(np.shape(t)[0]),
+    )
+
+
+# --- filling and resampling -------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class Filled:
+    """Samples with the short gaps filled: the measured samples unchanged, interpolated ones between."""
+
+    t: np.ndarray
+    columns: dict[str, np.ndarray]
+    filled: np.ndarray
+    """True for the interpolated samples."""
+    source: np.ndarray
+    """Index of the measured sample at or before each sample (the input's row)."""
+    segments: tuple[tuple[int, int], ...]
+    """Half-open gap-free ranges of the output, split at the gaps that were not filled."""
+
+
+def fill_gaps(t: np.ndarray, columns: Mapping[str, np.ndarray], gaps: Gaps) -> Filled:
+    """Insert the missing samples of every filled gap of ``gaps`` by linear interpolation in ``t`` and the
+    float columns; other columns (identifiers) hold the previous value."""
+    n = gaps.n
+    fills = [(int(i), int(m) + 1) for i, m, f in zip(gaps.index, gaps.missing, gaps.filled) if f]
+    if not fills:
+        return Filled(
+            t=t, columns=dict(columns), filled=np.zeros(n, dtype=bool), source=np.arange(n),
+            segments=gaps.segments,
+        )
+    # q: each output sample as a fractional index into the input (k sub-intervals per filled gap)
+    pieces: list[np.ndarray] = []
+    prev = 0
+    for i, k in fills:
+        pieces.append(np.arange(prev, i + 1, dtype=np.float64))
+        pieces.append(i + np.arange(1, k, dtype=np.float64) / k)
+        prev = i + 1
+    pieces.append(np.arange(prev, n, dtype=np.float64))
+    q = np.concatenate(pieces)
+    idx = np.arange(n, dtype=np.float64)
+    source = np.floor(q).astype(np.int64)
+    out = {
+        name: np.interp(q, idx, col) if col.dtype.kind == "f" else col[source]
+        for name, col in columns.items()
+    }
+    new_index = np.searchsorted(q, np.arange(n, dtype=np.float64))
+    cuts = [int(new_index[i + 1]) for i in gaps.breaks]
+    return Filled(
+        t=np.interp(q, idx, t), columns=out, filled=q != np.floor(q), source=source,
+        segments=tuple(pairwise([0, *cuts, q.size])),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class Resampled:
+    """Segments put on a uniform grid and concatenated."""
+
+    t: np.ndarray
+    """Grid times [s]; each segment starts 1000 intervals after the previous one ended, so that the
+    concatenated axis is visibly not continuous."""
+    columns: dict[str, np.ndarray]
+    segments: tuple[tuple[int, int], ...]
+    """Half-open ranges of the kept segments in the output."""
+
+
+def resample_uniform(
+    t: np.ndarray,
+    columns: Mapping[str, np.ndarray],
+    ts: float,
+    segments: tuple[tuple[int, int], ...],
+    min_len: int,
+) -> Resampled:
+    """Each segment of (``t``, ``columns``) on a grid of interval ``ts`` from its first sample, by linear
+    interpolation between neighbouring samples (for samples with arrival jitter). Segments of fewer than
+    ``min_len`` grid points are dropped; no segment kept leaves empty arrays."""
+    out: dict[str, list[np.ndarray]] = {k: [] for k in columns}
+    tgrid: list[np.ndarray] = []
+    kept: list[tuple[int, int]] = []
+    n_total = 0
+    t_offset = 0.0
+    for a, b in segments:
+        if b - a < 2:
+            continue
+        tp = t[a:b]
+        n = math.floor((tp[-1] - tp[0]) / ts + 1e-9) + 1
+        if n < min_len:
+            continue
+        g = tp[0] + ts * np.arange(n)
+        for k, v in columns.items():
+            out[k].append(np.interp(g, tp, v[a:b]))
+        tgrid.append(g - g[0] + t_offset)
+        t_offset += n * ts + 1000.0 * ts
+        kept.append((n_total, n_total + n))
+        n_total += n
+    cat = lambda parts: np.concatenate(parts) if parts else np.zeros(0)  # noqa: E731
+    return Resampled(t=cat(tgrid), columns={k: cat(v) for k, v in out.items()}, segments=tuple(kept))
