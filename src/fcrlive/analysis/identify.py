@@ -35,41 +35,9 @@ from fcrlive.analysis.controller import ControllerFitError
 from fcrlive.analysis.report import IdentifyReport, build_report
 from fcrlive.constants import F0_HZ
 from fcrlive.errors import DataError, UserError
-from fcrlive.signals import PlantSignals
+from fcrlive.signals import PlantSignals, excitation_detected
 
 METHODS = ("auto", "zu", "zur", "zcu", "sine", "lowband")
-
-EXCITATION_RESOLUTION_FACTOR = 4.0
-"""r counts as an excitation when its rms exceeds this many times the rms of the columns' rounding
-(:func:`excitation_detected`)."""
-
-
-def _resolution(x: np.ndarray) -> float:
-    """The quantum of a logged column [its unit]: smallest step between its distinct values (0 when it
-    looks continuous, i.e. more distinct values than a quantised column of its range would have)."""
-    v = np.unique(np.round(np.asarray(x, float), 9))
-    if v.size < 2:
-        return 0.0
-    q = float(np.min(np.diff(v)))
-    return q if q > 1e-8 else 0.0
-
-
-def excitation_detected(s: PlantSignals) -> bool:
-    """Whether r = (GridFreq − ApplFreqSig)/f0 is an excitation and not rounding.
-
-    GridFreq written with 3 decimals and ApplFreqSig with 6 differ by up to 0.5 mHz everywhere: their
-    peak-to-peak difference alone (the old test, 1 mHz) took that for an excitation and ran Z_cu on a
-    normal-operation log (1.5 pp off). r must exceed the rounding of both columns clearly: rms(r) above
-    EXCITATION_RESOLUTION_FACTOR × (q_f + q_a)/√12 (q the columns' quanta) and above 0.1 mHz.
-    """
-    if not s.has_excitation:
-        return False
-    f = s.f0 * (1.0 + np.asarray(s.y, float))
-    fa = f - s.f0 * np.asarray(s.r, float)
-    q = _resolution(f) + _resolution(fa)
-    rms = float(np.std(np.asarray(s.r, float)) * s.f0)
-    return rms > max(EXCITATION_RESOLUTION_FACTOR * q / np.sqrt(12.0), 1e-4)
-
 
 @dataclass(frozen=True, eq=False)
 class Identification:

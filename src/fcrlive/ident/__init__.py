@@ -47,6 +47,7 @@ from fcrlive.ident.validation import (
     CompareResult,
     OrderSearchResult,
     ResidResult,
+    XResidResult,
     aic,
     arx_order_search,
     bic,
@@ -54,12 +55,13 @@ from fcrlive.ident.validation import (
     compare,
     fpe,
     resid,
+    xresid,
 )
 
 __all__ = [
     "CompareResult", "EstimationReport", "FreqResp", "IdData", "IdentError", "NonFiniteDataError",
     "NotExcitingError", "OrderError", "OrderSearchResult", "PeakGain", "PolyModel", "ResidResult",
-    "StrucTable", "TooFewSamplesError", "UnstableModelError", "aic", "arx", "arx_order_search", "arxstruc",
-    "bic", "bj", "bj_order_search", "choose_fir_length", "compare", "fir_projection", "fpe", "oe",
-    "projection", "resid", "selstruc", "two_stage",
+    "StrucTable", "TooFewSamplesError", "UnstableModelError", "XResidResult", "aic", "arx",
+    "arx_order_search", "arxstruc", "bic", "bj", "bj_order_search", "choose_fir_length", "compare",
+    "fir_projection", "fpe", "oe", "projection", "resid", "selstruc", "two_stage", "xresid",
 ]

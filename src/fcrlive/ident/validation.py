@@ -43,6 +43,30 @@ def _xcorr_sum(a_segs, b_segs, lags: np.ndarray) -> np.ndarray:
     return out
 
 
+def _independence(e_segs, u_segs, re: np.ndarray, r_e: np.ndarray, M: int, k0: int, n: int
+                  ) -> tuple[np.ndarray, float]:
+    """r_εu(τ), τ = −M..M, and the p-value of the portmanteau independence test over τ = k0..M."""
+    kk = np.arange(-M, M + 1)
+    taper = 1.0 - np.abs(kk) / (M + 1)  # Bartlett weights keep the covariance estimate positive
+    re_sym = r_e[np.abs(kk)] * taper
+    ru = _xcorr_sum(u_segs, u_segs, np.arange(3 * M + 2)) / n
+    reu = _xcorr_sum(e_segs, u_segs, kk) / n
+    xc = reu / np.sqrt(re[0] * ru[0])
+    r_u = ru / ru[0]
+    taus = np.arange(k0, M + 1)
+    pos = xc[M + taus]
+    # Cov of √N r̂_εu(τ1), √N r̂_εu(τ2) for ε independent of u: Σ_k r_ε(k) r_u(k + τ2 − τ1)
+    diff = taus[None, :] - taus[:, None]
+    P = np.zeros((taus.size, taus.size))
+    for k, w in zip(kk, re_sym):
+        P += w * r_u[np.abs(k + diff)]
+    try:
+        s = n * float(pos @ np.linalg.solve(P, pos))
+    except np.linalg.LinAlgError:
+        s = n * float(pos @ np.linalg.lstsq(P, pos, rcond=None)[0])
+    return xc, float(stats.chi2.sf(s, taus.size))
+
+
 @dataclass(frozen=True)
 class ResidResult:
     """Residual analysis.
@@ -97,39 +121,60 @@ def resid(model: PolyModel, data: IdData, max_lag: int = 25, confidence: float =
     q = n * float(np.sum(r_e[1:] ** 2))
     white_p = float(stats.chi2.sf(q, dof_w))
     outside.append(int(np.sum(np.abs(r_e[1:]) > band)))
-    kk = np.arange(-M, M + 1)
-    taper = 1.0 - np.abs(kk) / (M + 1)  # Bartlett weights keep the covariance estimate positive
-    re_sym = r_e[np.abs(kk)] * taper
     for i in range(data.nu):
         u_segs = [u[:, i] for _, u in data.segments()]
-        ru = _xcorr_sum(u_segs, u_segs, np.arange(3 * M + 2)) / n
-        reu = _xcorr_sum(e_segs, u_segs, xl) / n
-        xc[i] = reu / np.sqrt(re[0] * ru[0])
-        r_u = ru / ru[0]
         # lags τ ≥ nk_i: below the delay the model has no term, and in closed loop with a direct
         # feed-through controller ε(t) and u(t) are correlated through the feedback anyway
         k0 = model.nk[i] if i < model.nu else 0
-        taus = np.arange(k0, M + 1)
-        pos = xc[i, M + taus]
-        # Cov of √N r̂_εu(τ1), √N r̂_εu(τ2) for ε independent of u: Σ_k r_ε(k) r_u(k + τ2 − τ1)
-        diff = taus[None, :] - taus[:, None]
-        P = np.zeros((taus.size, taus.size))
-        for k, w in zip(kk, re_sym):
-            P += w * r_u[np.abs(k + diff)]
-        try:
-            s = n * float(pos @ np.linalg.solve(P, pos))
-        except np.linalg.LinAlgError:
-            s = n * float(pos @ np.linalg.lstsq(P, pos, rcond=None)[0])
-        p = float(stats.chi2.sf(s, taus.size))
+        xc[i], p = _independence(e_segs, u_segs, re, r_e, M, k0, n)
         ind_p.append(p)
         ind_ok.append(p > 1 - confidence)
-        outside.append(int(np.sum(np.abs(pos) > band)))
+        outside.append(int(np.sum(np.abs(xc[i, M + k0:]) > band)))
     return ResidResult(
         lags=lags, autocorr=r_e, xlags=xl, xcorr=xc,
         band99=float(stats.norm.ppf(0.995) / np.sqrt(n)), band95=float(stats.norm.ppf(0.975) / np.sqrt(n)),
         whiteness_p=white_p, independence_p=tuple(ind_p), confidence=confidence,
         white=white_p > 1 - confidence, independent=tuple(ind_ok), n_outside=tuple(outside),
     )
+
+
+@dataclass(frozen=True)
+class XResidResult:
+    """Independence of residuals from an external signal (:func:`xresid`).
+
+    Attributes:
+        xlags: −M..M.
+        xcorr: r_εx(τ) over ``xlags``.
+        band99: per-lag ±99 % band (1/√N scale).
+        p: p-value of the portmanteau test over τ = 0..M (ε's colour accounted for).
+        independent: p > 1 − confidence.
+    """
+
+    xlags: np.ndarray
+    xcorr: np.ndarray
+    band99: float
+    p: float
+    independent: bool
+
+
+def xresid(eps_segs: Sequence[np.ndarray], x_segs: Sequence[np.ndarray], max_lag: int = 20,
+           confidence: float = 0.99) -> XResidResult:
+    """Are residuals ε independent of a signal x that is NOT a model input (per experiment, summed)?
+
+    The closed-loop use: x an external excitation r, which the process noise cannot reach, so a model
+    whose residual still carries r at any lag τ ≥ 0 has dynamics missing, whatever the residual's colour.
+    An input inside the loop (c, u) is a function of past noise, and an output-error model's coloured
+    residual is correlated with it at τ > 0 even when the model is exact."""
+    e_segs = [np.asarray(e, float) - np.mean(e) for e in eps_segs]
+    x_segs = [np.asarray(x, float) - np.mean(x) for x in x_segs]
+    n = sum(e.size for e in e_segs)
+    M = int(max_lag)
+    re = _xcorr_sum(e_segs, e_segs, np.arange(M + 1)) / n
+    if not (re[0] > 0 and sum(float(x @ x) for x in x_segs) > 0):
+        raise ValueError("xresid needs residuals and a signal that are not identically zero")
+    xc, p = _independence(e_segs, x_segs, re, re / re[0], M, 0, n)
+    return XResidResult(np.arange(-M, M + 1), xc, float(stats.norm.ppf(0.995) / np.sqrt(n)), p,
+                        p > 1 - confidence)
 
 
 @dataclass(frozen=True)

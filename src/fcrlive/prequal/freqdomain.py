@@ -372,7 +372,7 @@ def evaluate_operation(
         reqs, f89 = _req8_req9(v, ctx, uncertain=True, where="10-300 s (identified from normal operation)")
         figs.update(f89)
         exp = getattr(identification, "experiment", None)
-        failed_val = [k for k, r in (getattr(exp, "validation", None) or {}).items() if not r.passed]
+        failed_val = list(getattr(exp, "resid_failed", ()))
         if failed_val:
             # the interval is the parameter uncertainty of a model the data reject: it says nothing of the
             # model error (measured on fcrlive's simulated paper plant: min|1 + FG| 0.51 [0.46, 0.57]
