@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from fcrlive.analysis import experiments as ex
+from fcrlive.analysis.identify import identify_signals
 from fcrlive.ident import xresid
 from fcrlive.plant.params import preset
 from fcrlive.sim import SimConfig, simulate
@@ -84,3 +85,29 @@ def test_xresid_accounts_for_the_residuals_colour():
     assert not xresid([e], [x]).independent
     with pytest.raises(ValueError):
         xresid([np.zeros(100)], [x[:100]])
+
+
+@pytest.fixture(scope="module")
+def zoo_e_half_rate():
+    from fcrlive.sim import logger as lg
+    from fcrlive.sim import zoo
+
+    plant = "E-stiff5pct-classic-demand-25Hz"
+    out = []
+    for seed in (0, 1, 2):
+        res = zoo.simulate(plant, minutes=30, excitation=True, seed=seed)
+        out.append(lg.signals(res, zoo.zoo_logger("half-0.5pct"), seed=zoo.logger_seed(seed, "half-0.5pct")))
+    return zoo.truth(plant), out
+
+
+def test_a_rejected_zcu_model_falls_back_to_lowband(zoo_e_half_rate):
+    # An excited log at half the controller rate, no plant description: Z_cu's controller fit passes,
+    # but its a ← c model still carries r (1.1-3 % of a's rms). Its numbers were wrong with narrow
+    # intervals (seed 0: droop 4.44 [4.31, 4.56] % against 6 %); auto answers from the low band instead.
+    tr, sigs = zoo_e_half_rate
+    for sig in sigs:
+        rep = identify_signals(sig, rated_mw=tr.rated_mw, kd=tr.kd, h=tr.H)
+        assert rep.method == "lowband"
+        assert rep.method_reason.startswith("Z_cu rejected by the data (residual test of the a ← c model")
+        forced = identify_signals(sig, rated_mw=tr.rated_mw, kd=tr.kd, h=tr.H, method="zcu")
+        assert any(w.startswith("residual test of the a ← c model failed") for w in forced.warnings)
