@@ -104,15 +104,12 @@ def test_absurd_droop_is_not_a_number():
         screen_result(_res(104.71, (0.0, 6.7e6)), ["x.csv"])
     with pytest.raises(DataError, match=r"outside the 0\.5-30 %"):
         screen_result(_res(0.00008, (0.00007, 0.00009)), ["x.csv"])
-    wide = screen_result(_res(0.106, (0.0, 0.648), peak=(0.8, 0.1, 2.0)), ["x.csv"]).report
-    assert wide.droop.value is None and wide.max_abs_g1.value is None
-    assert wide.max_abs_s.value == 1.2
-    assert any("droop [%] not identifiable: 10.6" in w for w in wide.warnings)
-    # the reason travels with the quantity and in not_identifiable, as the estimators' nulls do
-    assert wide.droop.reason.startswith("droop [%] not identifiable: 10.6")
-    assert set(wide.not_identifiable) == {"droop", "g1_static", "max_abs_g1"}
-    fine = screen_result(_res(0.08, (0.079, 0.081)), ["x.csv"]).report
-    assert fine.droop.value == 0.08 and fine.warnings == []
+    # a plausible droop passes unchanged: the width rule (an interval wider than the value) is applied by
+    # the identification itself for every caller (analysis.quality; tests/test_identify_quality.py)
+    res = _res(0.106, (0.0, 0.648), peak=(0.8, 0.1, 2.0))
+    assert screen_result(res, ["x.csv"]) is res
+    fine = _res(0.08, (0.079, 0.081))
+    assert screen_result(fine, ["x.csv"]) is fine
 
 
 def test_identification_errors_name_the_files_and_say_what_to_do():

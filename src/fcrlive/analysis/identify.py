@@ -30,6 +30,7 @@ import numpy as np
 
 from fcrlive.analysis import experiments as ex
 from fcrlive.analysis import lowband as lb
+from fcrlive.analysis import quality
 from fcrlive.analysis.assess import PEAK_MIN_PERIOD_S, Assessment, assess, peak_band
 from fcrlive.analysis.controller import ControllerFitError
 from fcrlive.analysis.report import IdentifyReport, build_report
@@ -155,7 +156,44 @@ def identify_full(
     """The pipeline (module docstring). ``plant``: an fcrlive Plant; its controller is used for Z_cu and
     its droop for the sine-test normalisation. ``peak_min_period_s``: shortest period of the band in which
     max|G_1| and max|S| are searched (analysis.assess.peak_band). Raises DataError/UserError with
-    one-line messages."""
+    one-line messages.
+
+    Every report passes :func:`fcrlive.analysis.quality.withhold`: a quantity whose 95 % interval is
+    missing, of zero width or wider than its value, and every quantity of a Z_ur search that did not
+    converge, is null with the reason (``not_identifiable``), for the CLI, the daemon and prequal alike."""
+    res = _identify(
+        signals, rated_mw=rated_mw, f0=f0, kd=kd, plant=plant, method=method, ts_id=ts_id, t_fme_s=t_fme_s,
+        peak_min_period_s=peak_min_period_s, h=h,
+    )
+    return replace(res, report=quality.withhold(res.report, _not_identifiable(res)))
+
+
+def _not_identifiable(res: Identification) -> dict[str, str]:
+    """Quantities the method itself says it cannot give (beyond the width rule): all of Z_ur when its
+    search did not converge; the droop of the sine tests (the setting, not a measurement)."""
+    rep, exp = res.report, res.experiment
+    if rep.method == "zur":
+        fit = exp.models["epsilon<-(u,r)"].report
+        return quality.zur_not_converged(fit.converged, fit.stop_reason)
+    if rep.method == "sine" and rep.droop is not None and rep.droop.value is not None:
+        return {"droop": quality.SINE_DROOP.format(droop=100.0 * rep.droop.value)}
+    return {}
+
+
+def _identify(
+    signals: PlantSignals | Sequence[PlantSignals],
+    *,
+    rated_mw: float | None,
+    f0: float,
+    kd: float,
+    plant,
+    method: str,
+    ts_id: float,
+    t_fme_s: float | None,
+    peak_min_period_s: float,
+    h: float | None,
+) -> Identification:
+    """:func:`identify_full` before the quality rules."""
     sigs = [signals] if isinstance(signals, PlantSignals) else list(signals)
     if not sigs:
         raise UserError("no data")

@@ -6,14 +6,13 @@ errors from identification tied to the files, results that cannot be right not s
 - :func:`identification_error`: an error of the identification stage (which knows signals, not files) as
   one line naming the files and saying what to do.
 - :func:`screen_result`: a droop outside :data:`DROOP_RANGE` is not a plant's: DataError (not
-  identifiable, with the reason; the units or the log are wrong, so nothing else is shown). A droop, G_1(0),
-  max|G_1| or max|S| whose 95 % interval is wider than itself is shown as "not identifiable" (null in the
-  JSON) with a warning that says why.
+  identifiable, with the reason; the units or the log are wrong, so nothing else is shown). The rules that
+  null a quantity with its reason (an interval wider than the value, none, zero width; a Z_ur search that
+  did not converge) are :mod:`fcrlive.analysis.quality`'s, applied inside the identification.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -59,19 +58,10 @@ def identification_error(exc: UserError, paths: Sequence[Path]) -> UserError:
     return type(exc)(text, where=where)
 
 
-def _wide(v) -> bool:
-    """True when a value with an interval is not a number one can use: missing, non-finite, or its 95 %
-    interval wider than its magnitude."""
-    if v is None or v.value is None:
-        return False
-    lo, hi = v.ci95
-    if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
-        return True
-    return (hi - lo) > abs(v.value)
-
-
 def screen_result(res, paths: Sequence[Path]):
-    """The identification with absurd numbers taken out (module docstring); DataError for the droop."""
+    """The identification, or DataError when its droop is outside :data:`DROOP_RANGE` (module docstring).
+    The width rule and the other rules of an honest result are applied by the identification itself
+    (:mod:`fcrlive.analysis.quality`), for the daemon and prequal too; this is what only the CLI adds."""
     rep = res.report
     names = ", ".join(str(p) for p in paths)
     d = rep.droop
@@ -85,30 +75,7 @@ def screen_result(res, paths: Sequence[Path]):
             "power",
             where=names,
         )
-    update, warnings, ni = {}, list(rep.warnings), dict(rep.not_identifiable)
-    for key, label, scale in (
-        ("droop", "droop [%]", 100.0),
-        ("g1_static", "G_1(0)", 1.0),
-        ("max_abs_g1", "max|G_1|", 1.0),
-        ("max_abs_s", "max|S|", 1.0),
-    ):
-        v = getattr(rep, key)
-        if _wide(v):
-            lo, hi = (f"{scale * x:.3g}" if x is not None else "?" for x in v.ci95)
-            why = (
-                f"{label} not identifiable: {scale * v.value:.3g} with a 95 % interval [{lo}, {hi}] wider "
-                "than itself (too little movement of frequency and power in the log for it)"
-            )
-            # the same reason in the quantity and in not_identifiable as the estimators give theirs
-            update[key] = v.model_copy(update={"value": None, "ci95": (None, None), "reason": why})
-            ni.setdefault(key, why)
-            warnings.append(why)
-    if not update:
-        return res
-    from dataclasses import replace
-
-    update.update(warnings=warnings, not_identifiable=ni)
-    return replace(res, report=rep.model_copy(update=update))
+    return res
 
 
 _MAX_NOTES_PER_LOG = 5

@@ -1,0 +1,194 @@
+"""The rules of an honest result (fcrlive.analysis.quality): a value with a usable 95 % interval, or null
+with the reason; on constructed reports of the real type, through a model without covariance, and end to
+end on a short simulated log."""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+import pytest
+
+from fcrlive.analysis import quality
+from fcrlive.analysis.assess import assess
+from fcrlive.analysis.experiments import ExperimentResult
+from fcrlive.analysis.identify import identify_full
+from fcrlive.analysis.report import IdentifyReport, PeakCI, TsoProduct, ValueCI, build_report
+from fcrlive.ident import PolyModel
+from fcrlive.plant.params import preset
+from fcrlive.sim import SimConfig, simulate
+from fcrlive.tso.signals import log_from_sim, plant_signals
+
+PLANT = preset("paper-plant1")
+KD = 0.1
+
+
+def _report(**fields) -> IdentifyReport:
+    """A report of the real type: droop 8 % [7.9, 8.1] %, G_1(0) 0.0794, max|G_1| 1.0, max|S| 1.3, TSO."""
+    base = dict(
+        method="zcu", method_reason="constructed", samples=1000, duration_s=1800.0, rated_mw=300.0,
+        f0_hz=50.0, kd=0.1,
+        droop=ValueCI(value=0.08, ci95=(0.079, 0.081)),
+        g1_static=ValueCI(value=0.0794, ci95=(0.0784, 0.0804)),
+        max_abs_g1=PeakCI(value=1.0, omega=0.2, ci95=(0.95, 1.05)),
+        max_abs_s=PeakCI(value=1.3, omega=0.3, ci95=(1.25, 1.35)),
+        gp_kind="G_p", gp=None, f=None, local=None,
+        tso={"fcrn": TsoProduct(stability_threshold=0.4085, stability_margin_band=0.5,
+                                stability_margin_wide=None, closed_loop_stable=True, performance_ratio=None,
+                                k_red_dyn=None, k_red_dyn_min=0.9, passed=True)},
+    )
+    return IdentifyReport(**{**base, **fields})
+
+
+# -- the width rule on one quantity -----------------------------------------------------------------
+
+def test_a_usable_interval_is_kept():
+    assert quality.withhold_wide(0.08, (0.079, 0.081), label="the droop", scale=100.0, unit=" %") is None
+    # exactly as wide as the value still tells the value from zero: kept
+    assert quality.withhold_wide(1.0, (0.5, 1.5)) is None
+    # a null value is already withheld (or not given by the method): nothing to add
+    assert quality.withhold_wide(None, (None, None)) is None
+
+
+def test_wider_than_the_value_says_so_with_the_numbers():
+    why = quality.withhold_wide(0.0599, (0.0, 0.224), label="the droop", scale=100.0, unit=" %")
+    assert why == ("not identifiable from this log: the droop 5.99 % with a 95 % interval [0, 22.4] % "
+                   "wider than the value (too little movement of frequency and power in the log for it)")
+
+
+@pytest.mark.parametrize(("ci", "words"), [
+    ((None, None), "has no 95 % interval (the model gives no covariance"),
+    ((math.nan, math.nan), "has no 95 % interval"),
+    ((0.07, math.inf), "has no 95 % interval"),
+    ((0.08, 0.08), "has zero width"),
+    ((0.081, 0.079), "is inverted"),
+    ((0.09, 0.10), "lies outside its own 95 % interval [9, 10] %"),
+])
+def test_no_usable_interval_is_withheld(ci, words):
+    why = quality.withhold_wide(0.08, ci, label="the droop", scale=100.0, unit=" %")
+    assert why is not None and why.startswith(quality.NOT_IDENTIFIABLE + ": ") and words in why
+
+
+def test_a_value_that_is_not_a_number_is_withheld():
+    assert "not a number" in quality.withhold_wide(math.nan, (0.0, 1.0), label="max|S|")
+
+
+# -- the rules on a whole report --------------------------------------------------------------------
+
+def test_nothing_to_withhold_gives_the_report_itself():
+    rep = _report()
+    assert quality.withhold(rep) is rep
+    assert quality.withhold(rep, quality.zur_not_converged(True, "converged")) is rep
+
+
+def test_wide_quantities_null_with_reason_in_quantity_list_and_warnings():
+    rep = _report(droop=ValueCI(value=0.106, ci95=(0.0, 0.648)),
+                  max_abs_g1=PeakCI(value=0.8, omega=0.1, ci95=(0.1, 2.0)),
+                  not_identifiable={"gp": "given by the estimator"}, warnings=["earlier warning"])
+    out = quality.withhold(rep)
+    assert out.droop.value is None and out.droop.ci95 == (None, None)
+    assert out.droop.reason.startswith("not identifiable from this log: the droop 10.6 % with a 95 % "
+                                       "interval [0, 64.8] % wider than the value")
+    assert out.max_abs_g1.value is None and out.max_abs_g1.omega is None
+    assert "max|G_1| 0.8 with a 95 % interval [0.1, 2]" in out.max_abs_g1.reason
+    # the narrow ones stay as they were, and so does what the estimator said before
+    assert out.max_abs_s == rep.max_abs_s and out.g1_static == rep.g1_static and out.tso == rep.tso
+    assert out.not_identifiable == {"gp": "given by the estimator", "droop": out.droop.reason,
+                                    "max_abs_g1": out.max_abs_g1.reason}
+    assert out.warnings == ["earlier warning", out.droop.reason, out.max_abs_g1.reason]
+    # the rules are idempotent: a second pass changes nothing
+    assert quality.withhold(out) is out
+    # and the JSON says null, never NaN
+    doc = out.to_json_dict()
+    assert doc["droop"] == {"value": None, "ci95": [None, None], "reason": out.droop.reason}
+
+
+def test_zur_not_converged_withholds_every_quantity_of_zur():
+    ni = quality.zur_not_converged(False, "maximum number of iterations (78) reached")
+    why = ("Z_ur search did not converge: maximum number of iterations (78) reached; no quantity of Z_ur is "
+           "identifiable from this log")
+    assert ni == dict.fromkeys(quality.ZUR_QUANTITIES, why)
+    assert quality.zur_not_converged(True, "predicted relative loss decrease below tolerance") == {}
+    out = quality.withhold(_report(method="zur", local={"max_s_bound": 2.0}), ni)
+    for key in ("droop", "g1_static", "max_abs_g1", "max_abs_s"):
+        v = getattr(out, key)
+        assert v.value is None and v.ci95 == (None, None) and v.reason == why
+    assert out.gp is None and out.f is None and out.tso is None and out.local is None
+    assert out.not_identifiable == ni and out.warnings == [why]
+
+
+def test_given_reasons_override_a_shown_value_and_fill_a_missing_one():
+    # Z_ur: a droop that looked fine and a G_1(0) the report did not carry both get the search's reason
+    rep = _report(g1_static=None)
+    out = quality.withhold(rep, {"droop": "d", "g1_static": "g"})
+    assert (out.droop.value, out.droop.reason) == (None, "d")
+    assert (out.g1_static.value, out.g1_static.reason) == (None, "g")
+
+
+# -- a model without covariance: NaN, never a zero-width interval ---------------------------------
+
+def _first_order(cov) -> PolyModel:
+    """G_1 = 0.008/(1 − 0.9 q⁻¹) at Ts = 1 s: G_1(0) = 0.08."""
+    return PolyModel(a=[1.0], b=([0.008],), c=[1.0], d=[1.0], f=([1.0, -0.9],), nk=(0,), Ts=1.0,
+                     covariance=cov, input_names=("u",), output_name="epsilon")
+
+
+def test_a_model_without_covariance_has_unknown_not_zero_uncertainty():
+    m = _first_order(None)
+    g, sd = m.static_gain()
+    assert g == pytest.approx(0.08) and math.isnan(sd)
+    fr = m.freqresp(np.array([0.01, 0.1, 1.0]))
+    lo, hi = fr.ci95_abs()
+    assert np.all(np.isnan(fr.sd_abs)) and np.all(np.isnan(lo)) and np.all(np.isnan(hi))
+    pk = m.peak_gain()
+    assert all(math.isnan(x) for x in pk.ci95())
+
+
+def _experiment(m: PolyModel) -> ExperimentResult:
+    def responses(omega):
+        return {"G_1": m.freqresp(np.atleast_1d(np.asarray(omega, float)), 0)}
+
+    return ExperimentResult("zu", m.Ts, 1800, 1800.0, {"epsilon<-u": m}, responses, ("G_1",))
+
+
+def test_a_model_without_covariance_reports_null_with_reason():
+    a = assess(_experiment(_first_order(None)), kd=0.0)
+    assert math.isnan(a.droop.lo) and math.isnan(a.droop.hi)
+    assert math.isnan(a.g1_static.lo) and all(math.isnan(x) for x in a.max_g1.ci95)
+    rep = quality.withhold(build_report(a, method_reason="t", samples=1800, duration_s=1800.0, rated_mw=300.0,
+                                        f0=50.0))
+    for key in ("droop", "g1_static", "max_abs_g1"):
+        v = getattr(rep, key)
+        assert v.value is None and "has no 95 % interval (the model gives no covariance" in v.reason
+    # the same model with a covariance keeps its numbers (the rule is about the interval, not the model)
+    cov = np.diag([1e-8, 1e-6])
+    rep2 = quality.withhold(build_report(assess(_experiment(_first_order(cov)), kd=0.0), method_reason="t",
+                                         samples=1800, duration_s=1800.0, rated_mw=300.0, f0=50.0))
+    assert rep2.droop.value == pytest.approx(0.08) and rep2.droop.ci95[0] < 0.08 < rep2.droop.ci95[1]
+
+
+# -- end to end -----------------------------------------------------------------------------------
+
+@functools.cache
+def _short_quiet_log():
+    """10 min of normal operation at 12 dB, seed 5: too little movement for Z_u's droop (its interval
+    came out 6 % in [0, 22] %, 3.7x the value: far from the 1x limit, so no rounding decides it)."""
+    res = simulate(PLANT, SimConfig(duration_s=600, snr_db=12.0, excitation=False, seed=5))
+    return plant_signals(log_from_sim(res), rated_mw=300.0)
+
+
+def test_short_low_snr_log_gives_a_null_droop_with_its_reason():
+    res = identify_full(_short_quiet_log(), rated_mw=300.0, kd=KD)
+    r, a = res.report, res.assessment
+    assert r.method == "zu"
+    # what the estimator gave (kept in the assessment): an interval far wider than the value
+    assert (a.droop.hi - a.droop.lo) / a.droop.value > 2
+    # what is reported: no number, the reason with those numbers, everywhere a reader looks
+    assert r.droop.value is None and r.droop.ci95 == (None, None)
+    assert r.droop.reason == quality.withhold_wide(a.droop.value, (a.droop.lo, a.droop.hi),
+                                                   label="the droop", scale=100.0, unit=" %")
+    assert f"the droop {100 * a.droop.value:.3g} % with a 95 % interval" in r.droop.reason
+    assert r.not_identifiable["droop"] == r.droop.reason
+    assert r.warnings.count(r.droop.reason) == 1
+    assert r.max_abs_s is None and r.tso is None  # Z_u cannot give them: not withheld, just absent
