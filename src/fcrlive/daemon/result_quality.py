@@ -24,7 +24,10 @@ identification says this window cannot give (null with a reason, e.g. lowband's 
 ``undecided`` (a margin's 95 % interval reaches over its limit) is an honest result, published on
 ``tso/<product>``, not a reason to reject the run. The
 interval is the report's [lower, upper] as it is (the droop's is not symmetric). Thresholds:
-``[identification.result_quality]`` (docs/config.md).
+``[identification.result_quality]`` (docs/config.md). The built-in identification has already nulled,
+with the reason, every number whose interval is missing, of zero width or wider than the value
+(:mod:`fcrlive.analysis.quality`): this rule can be stricter than that, not looser; it judges a
+plug-in's report as it comes.
 """
 
 from __future__ import annotations

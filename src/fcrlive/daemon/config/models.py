@@ -169,7 +169,8 @@ class ResultQualityConfig(_Section):
     uncertain_ci_rel_width: float = Field(
         0.25, gt=0, description="95 % interval width relative to the value above which a number is uncertain")
     reject_ci_rel_width: float = Field(
-        1.0, gt=0, description="95 % interval width relative to the value above which a number is rejected")
+        1.0, gt=0, description="95 % interval width relative to the value above which a number is rejected "
+        "(the identification already withholds one wider than its value: above 1.0 no effect on its numbers)")
 
     @model_validator(mode="after")
     def _check(self) -> ResultQualityConfig:
