@@ -14,7 +14,7 @@ from fcrlive.analysis import quality
 from fcrlive.analysis.assess import assess
 from fcrlive.analysis.experiments import ExperimentResult
 from fcrlive.analysis.identify import identify_full
-from fcrlive.analysis.report import IdentifyReport, PeakCI, TsoProduct, ValueCI, build_report
+from fcrlive.analysis.report import IdentifyReport, PeakCI, TsoProduct, ValueCI, build_report, text_summary
 from fcrlive.ident import PolyModel
 from fcrlive.plant.params import preset
 from fcrlive.sim import SimConfig, simulate
@@ -192,3 +192,5 @@ def test_short_low_snr_log_gives_a_null_droop_with_its_reason():
     assert r.not_identifiable["droop"] == r.droop.reason
     assert r.warnings.count(r.droop.reason) == 1
     assert r.max_abs_s is None and r.tso is None  # Z_u cannot give them: not withheld, just absent
+    line = next(x for x in text_summary(r).splitlines() if x.startswith("effective droop"))
+    assert r.droop.reason in line and "not identifiable: not identifiable" not in line

@@ -300,7 +300,10 @@ def build_report(
 
 def _ci(v: ValueCI | None, fmt: str = "{:.4f}", scale: float = 1.0, unit: str = "") -> str:
     if v is None or v.value is None:
-        return "not identifiable" + (f": {v.reason}" if v is not None and v.reason else "")
+        why = v.reason if v is not None else None
+        if why and why.startswith("not "):  # "not identifiable from this log: ..." says it already
+            return why
+        return "not identifiable" + (f": {why}" if why else "")
     lo, hi = v.ci95
     s = fmt.format(v.value * scale)
     if lo is not None and hi is not None:
