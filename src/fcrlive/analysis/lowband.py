@@ -42,14 +42,17 @@ and put the 60-min coverage at 99.7 % (above the 98 % of issue 12); a 10-s fit (
 cell) gave a 60-min median of 0.023 pp against 0.027 pp and coverage 98.8 %, and turned plant B's
 2-Hz bias below from −0.16 into +0.05 pp without reducing its spread (median abs error 0.17 vs 0.19 pp).
 
-Known bias (measured, not removed): instantaneous samples well below the controller rate alias the
-white process noise on the governor's speed signal into the fit band. On plant B (10 Hz controller,
-6 dB, H = 3 s, Kd = 0) logged at 2 Hz the droop is 0.23 pp low (median, 60 min; −1.1 pp on 15 min),
-with the interval covering 11/12 (10/12 on 15 min). An ideal logger (no meter noise, no quantisation,
-no jitter) at 1/5 and 1/10 of the controller rate gives the same −0.16 pp on seeds 0-7, at 1/2 of it
-+0.02 pp; forming dε/dt from the noise-free speed does not change it, so it is the aliased pair
-(ε, ΔP_m) of the noise above the log's Nyquist rate, not the derivative: that pair relates through
-G_p at high frequency, not at the frequency it aliases to. No remedy from the log alone was found.
+Known bias (measured, not removed): instantaneous samples well below the controller rate fold the
+content of u and ε above the log's Nyquist frequency into the fit band, where that folded pair does not
+satisfy z = G_p ε (it relates through the swing equation and G_p at the frequency it came from, and the
+1-s derivative sees it at the frequency it folds to). On plant B (10 Hz controller, 6 dB, H = 3 s,
+Kd = 0) logged at 2 Hz the droop is 0.23 pp low (median, 60 min; −1.1 pp on 15 min), the interval
+covering 11/12 (10/12 on 15 min). An ideal logger (no meter noise, no quantisation, no jitter) at 1/5
+and 1/10 of the controller rate gives the same −0.16 pp on seeds 0-7, at 1/2 of it +0.02 pp, at the
+controller rate +0.001 pp; forming dε/dt from the noise-free speed does not change it; with the
+process noise switched off the error becomes +0.11 pp (the white load noise at the controller rate
+folds as well). The other plants are logged at 4-20 Hz by the same logger and stay within 0.07 pp.
+No remedy from the log alone was found.
 
 Band diagnostics (:class:`BandInfo`): the power meter's noise floor (median periodogram of u over the
 upper half of the log's band, as % of rated of an equivalent white noise at the log rate), u's
