@@ -36,7 +36,7 @@ controller rate: 0.06 / 0.20 pp, truth inside the interval 20/20; 15 min 1 Hz: 0
 
 Measured on the validation zoo (docs/zoo.md; 7 plants, 12 seeds per cell, loggers with meter noise
 ≤ 0.5 %: controller rate, 1/2, 1/5, 1 s historian means): 60 min, droop error median 0.025 pp, 95th
-percentile 0.22 pp, coverage 97.3 % (327/336); 15 min, median 0.19 pp, coverage 98.5 %. Two interval
+percentile 0.22 pp, coverage 97.3 % (327/336); 15 min, median 0.19 pp, coverage 98.5 %. Two
 variants were measured and not taken: 10 jackknife groups instead of 5 widened the intervals by 15-30 %
 and put the 60-min coverage at 99.7 % (above the 98 % of issue 12); a 10-s fit (TS_ID, 6 seeds per
 cell) gave a 60-min median of 0.023 pp against 0.027 pp and coverage 98.8 %, and turned plant B's
