@@ -297,7 +297,9 @@ class PolyModel:
             jac[:, s[("b", i)]] = (1.0 / (A * F))[:, None] * zi[:, None] ** bpow[None, :]
             jac[:, s[("f", i)]] = -(G / F)[:, None] * zk[:, :self.nf[i]]
         cov = self.covariance if self.covariance is not None else np.full((self.n_params,) * 2, np.nan)
-        return FreqResp(omega, G, jac, ((self.uid, cov),))
+        src = ((self.uid, cov),)
+        # checked construction only for what FreqResp would reject (a grid that is not 1-D)
+        return FreqResp._make(omega, G, jac, src) if omega.ndim == 1 else FreqResp(omega, G, jac, src)
 
     def static_gain(self, input: int | str = 0) -> tuple[float, float]:
         """(G_i(1), sd) — the DC gain of input i and its standard deviation."""
