@@ -24,6 +24,7 @@ the model structure contains the true system and the data are informative).
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -617,8 +618,41 @@ def _add_noise_model(st: _Struct, segs, Bs, Fs, n_ar: int) -> np.ndarray:
     return st.pack(Bs, Fs, C, D)
 
 
-def _start_simulated(st: _Struct, segs, ha: PolyModel, n_ar: int) -> np.ndarray:
-    """Start 1: Steiglitz-McBride of each B_i/F_i on the high-order ARX's noise-free output of u_i."""
+START_CACHE_SETS = 2
+"""Data sets whose high-order ARX models and Steiglitz-McBride starts :func:`_pem` keeps (Z_u fits five
+candidate orders on one data set: the same ARX for each, the same B/F start for equal nb, nf)."""
+_START_CACHE: OrderedDict = OrderedDict()
+
+
+def _start_cache(data: IdData) -> dict:
+    """The cache of start models for ``data``, by content (the arrays as bytes: a data set equal sample
+    for sample gets the same starts, a changed one never the old ones), the last START_CACHE_SETS."""
+    key = (data.Ts, data.starts, data.u.shape, data.y.tobytes(), data.u.tobytes())
+    c = _START_CACHE.get(key)
+    if c is None:
+        c = _START_CACHE[key] = {}
+        while len(_START_CACHE) > START_CACHE_SETS:
+            _START_CACHE.popitem(last=False)
+    else:
+        _START_CACHE.move_to_end(key)
+    return c
+
+
+def _cached(cache: dict | None, key, make):
+    """``cache[key]``, made by ``make()`` on a miss (no cache: ``make()``)."""
+    if cache is None:
+        return make()
+    v = cache.get(key)
+    if v is None:
+        v = cache[key] = make()
+    return v
+
+
+def _start_simulated(st: _Struct, segs, ha: PolyModel, n_ar: int, cache: dict | None = None,
+                     tag=None) -> np.ndarray:
+    """Start 1: Steiglitz-McBride of each B_i/F_i on the high-order ARX's noise-free output of u_i.
+
+    ``cache``/``tag``: :func:`_start_cache` and the key of ``ha`` in it (the B_i/F_i are kept by orders)."""
     Bs, Fs = [], []
     # a high-order ARX fitted in closed loop can have an unstable A: simulate with A's roots reflected
     # inside (|A| scaled by 1/Π|r|, compensated on B) so the noise-free output stays bounded
@@ -629,15 +663,24 @@ def _start_simulated(st: _Struct, segs, ha: PolyModel, n_ar: int) -> np.ndarray:
         gain = float(np.prod(np.maximum(np.abs(r), 1.0)))
         A = _reflect(A)
     for i in range(st.nu):
-        tgt = [(u[:, i], _filt(ha.b[i] / gain, A, u[:, i])) for _, u in segs]
-        B, F = _sm(tgt, st.nb[i], st.nf[i], st.nk[i])
+        def sm(i=i):
+            tgt = [(u[:, i], _filt(ha.b[i] / gain, A, u[:, i])) for _, u in segs]
+            return _sm(tgt, st.nb[i], st.nf[i], st.nk[i])
+        B, F = _cached(cache, ("sm", tag, i, st.nb[i], st.nf[i], st.nk[i]), sm)
         Bs.append(B)
         Fs.append(F)
     return _add_noise_model(st, segs, Bs, Fs, n_ar)
 
 
-def _start_whitened(st: _Struct, segs, ha: PolyModel, n_ar: int) -> np.ndarray:
-    """Start 2: Steiglitz-McBride on the ARX-whitened data (A_h y, A_h u); inputs in turn (backfitting)."""
+def _start_whitened(st: _Struct, segs, ha: PolyModel, n_ar: int, cache: dict | None = None,
+                    tag=None) -> np.ndarray:
+    """Start 2: Steiglitz-McBride on the ARX-whitened data (A_h y, A_h u); inputs in turn (backfitting).
+    ``cache``/``tag`` as :func:`_start_simulated`."""
+    Bs, Fs = _cached(cache, ("whitened", tag, st.nb, st.nf, st.nk), lambda: _whitened_bf(st, segs, ha))
+    return _add_noise_model(st, segs, list(Bs), list(Fs), n_ar)
+
+
+def _whitened_bf(st: _Struct, segs, ha: PolyModel) -> tuple[list, list]:
     nu = st.nu
     wsegs = [(_filt(ha.a, [1.0], y), _filt(ha.a, [1.0], u, axis=0)) for y, u in segs]
     Bs = [np.zeros(st.nk[i] + st.nb[i]) for i in range(nu)]
@@ -652,7 +695,7 @@ def _start_whitened(st: _Struct, segs, ha: PolyModel, n_ar: int) -> np.ndarray:
                         t -= _filt(Bs[j], Fs[j], uw[:, j])
                 tgt.append((uw[:, i], t))
             Bs[i], Fs[i] = _sm(tgt, st.nb[i], st.nf[i], st.nk[i])
-    return _add_noise_model(st, segs, Bs, Fs, n_ar)
+    return Bs, Fs
 
 
 def _real_roots(st: _Struct, th: np.ndarray) -> np.ndarray:
@@ -791,20 +834,26 @@ def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, mult
     if init is not None:
         starts = [_from_init(st, init)]
     else:
-        ha = arx(data, max(n_high, max(st.nf) + max(st.nb), 2), max(n_high, max(st.nb) + 1), st.nk)
+        cache = _start_cache(data)
+
+        def arx_cached(na: int, nb: int):
+            key = ("arx", na, nb, st.nk)
+            return key, _cached(cache, key, lambda: arx(data, na, nb, st.nk))
+
+        tag, ha = arx_cached(max(n_high, max(st.nf) + max(st.nb), 2), max(n_high, max(st.nb) + 1))
         arx_loss = ha.report.loss
         # the rows the ARX loss is computed on (its initial samples of each experiment left out)
         n0 = max(ha.na, *(k + m - 1 for k, m in zip(ha.nk, ha.nb)))
         arx_rows = np.concatenate([np.arange(a + n0, b) for a, b in data.bounds])
         lr_limit = float(stats.chi2.ppf(0.95, max(ha.n_params - st.p, 1)))
-        starts = [_start_simulated(st, segs, ha, n_ar)]
-        lazy.append(lambda: _start_whitened(st, segs, ha, n_ar))
+        starts = [_start_simulated(st, segs, ha, n_ar, cache, tag)]
+        lazy.append(lambda: _start_whitened(st, segs, ha, n_ar, cache, tag))
         if ha.na > 8:
             # a shorter whitening ARX leads the Steiglitz-McBride start into another basin at times
             def shorter():
-                return _start_simulated(
-                    st, segs, arx(data, max(ha.na // 2, max(st.nf) + max(st.nb), 2),
-                                  max(ha.nb[0] // 2, max(st.nb) + 1), st.nk), n_ar)
+                tag_s, ha_s = arx_cached(max(ha.na // 2, max(st.nf) + max(st.nb), 2),
+                                         max(ha.nb[0] // 2, max(st.nb) + 1))
+                return _start_simulated(st, segs, ha_s, n_ar, cache, tag_s)
             lazy.append(shorter)
     if not np.all(np.isfinite(starts[0])) or not _stable(st, starts[0]):
         raise UnstableModelError(f"initial {method.upper()} model could not be stabilised")
