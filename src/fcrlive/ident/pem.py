@@ -478,7 +478,8 @@ def _search_iter(st: _Struct, th0: np.ndarray, segs, maxiter: int, tol: float) -
                 break
             J = _jacobian(st, segs, aux)
         else:
-            th, V, k, converged, reason, eps, aux, J = _lm(st, th, eps, aux, J, V, segs, maxiter - it + 1, tol)
+            th, V, k, converged, reason, eps, aux, J = _lm(st, th, eps, aux, J, V, segs, maxiter - it + 1,
+                                                           tol)
             it += k
             break
     return _SearchResult(th, V, it, converged, reason, algorithm, eps, aux, J)
@@ -509,8 +510,8 @@ def _lm(st, th, eps, aux, J, V, segs, maxiter, tol):
             rel = (V - V2) / V
             th, V, eps, aux = cand, V2, e2, aux2
             if rel <= tol:
-                return (th, V, k, True, "Levenberg-Marquardt: relative loss decrease below tolerance", eps, aux,
-                        None)
+                return (th, V, k, True, "Levenberg-Marquardt: relative loss decrease below tolerance", eps,
+                        aux, None)
             J = _jacobian(st, segs, aux)
             H = J.T @ J
             g = J.T @ eps
@@ -525,8 +526,8 @@ def _lm(st, th, eps, aux, J, V, segs, maxiter, tol):
                 return th, V, k, gn < 1e-6 * np.sqrt(np.diag(H).max()), (
                     "Levenberg-Marquardt: no descent even with maximal damping"
                 ), eps, aux, J
-    return (th, V, k, False, f"Levenberg-Marquardt: maximum number of iterations ({maxiter}) reached", eps, aux,
-            J)
+    return (th, V, k, False, f"Levenberg-Marquardt: maximum number of iterations ({maxiter}) reached", eps,
+            aux, J)
 
 
 # ===================================================================== initial values
