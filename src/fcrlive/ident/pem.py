@@ -333,6 +333,9 @@ class _IcProjection:
         X -= self.Q @ (self.Q.T @ X)
 
 
+_potrf, _potrs = sla.lapack.dpotrf, sla.lapack.dpotrs
+
+
 def _ls(X: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Least squares by column-scaled normal equations (fast; used for initial values and GN directions).
 
@@ -342,14 +345,14 @@ def _ls(X: np.ndarray, y: np.ndarray) -> np.ndarray:
     scale[scale == 0] = 1.0
     G = (X.T @ X) / np.outer(scale, scale)
     g = (X.T @ y) / scale
-    try:
-        c = sla.cho_factor(G, check_finite=False)
-        if np.min(np.abs(np.diag(c[0]))) < 1e-7:
-            raise np.linalg.LinAlgError
-        sol = sla.cho_solve(c, g, check_finite=False)
-    except (np.linalg.LinAlgError, sla.LinAlgError):
-        sol = np.linalg.lstsq(X / scale, y, rcond=None)[0]
-    return sol / scale
+    # LAPACK's Cholesky directly, with the arguments cho_factor/cho_solve(check_finite=False) pass it (the
+    # same routines, bit for bit; their wrappers cost more than the solve of these small systems)
+    c, info = _potrf(G, lower=0, overwrite_a=0, clean=0)
+    if info == 0 and not np.min(np.abs(np.diag(c))) < 1e-7:
+        sol, info = _potrs(c, g, lower=0, overwrite_b=0)
+        if info == 0:
+            return sol / scale
+    return np.linalg.lstsq(X / scale, y, rcond=None)[0] / scale
 
 
 # ===================================================================== search
