@@ -2,8 +2,9 @@
 than the controller; honest nulls for the peaks; auto's excitation test against column rounding.
 
 Seeded simulations of the paper's plant (12 dB, 0.5 % of rated meter noise on the power). Accuracy and
-interval coverage over many seeds are measured in benchmarks (docs/identify.md); here one deterministic
-setting each, with tolerances several times the measured median error.
+interval coverage over many seeds are measured in benchmarks (docs/zoo.md) and asserted over seeds 0-7 on
+zoo cells (tests/test_zoo.py); here one deterministic setting each, with tolerances several times the
+measured median error.
 """
 
 from __future__ import annotations
@@ -57,7 +58,8 @@ def test_droop_from_normal_operation_with_meter_noise(record, log):
     lo, hi = rep.droop.ci95
     # measured over 20 seeds: median error 0.03 (1 s means) / 0.06 (half rate) pp, p95 0.06 / 0.20 pp
     assert abs(rep.droop.value - TRUE_DROOP) <= 0.002
-    assert lo < TRUE_DROOP < hi
+    # no single-seed "truth inside the interval": a 95 % interval misses one record in twenty, so that
+    # assertion fails for no fault of the estimator; coverage is asserted over seeds in test_zoo.py
     assert hi - lo > 0 and np.isfinite(hi - lo)
     # the meter-noise floor is measured: 0.5 % at 50 Hz, i.e. 0.5/√50 = 0.07 % in 1 s means, 0.5 % at 25 Hz
     floor = rep.data_quality["u_noise_floor_pct_rated"]

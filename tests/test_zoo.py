@@ -241,3 +241,54 @@ def test_zoo_signals_cell_is_deterministic():
     np.testing.assert_array_equal(a.u, b.u)
     np.testing.assert_array_equal(a.epsilon, b.epsilon)
     assert a.Ts == 1.0 and len(a) == 180 and a.c is None
+
+
+# ---------------------------------------------------------------------------------------------------
+# The droop from normal operation (lowband, H and Kd from the data sheet) on zoo cells
+#
+# Over seeds rather than one seed in its interval: a 95 % interval misses on one record in twenty, so a
+# single-seed coverage assertion fails for no fault of the estimator. Seeds 0-7 are deterministic, and
+# the thresholds are what issue 12 asks of the whole population (median error ≤ 0.2 pp on 60-min logs;
+# coverage 90-98 %, of which ≥ 6/8 is the binomial lower end: P(≤ 5 of 8 | 95 %) = 0.6 %).
+
+NORMAL_SEEDS = range(8)
+
+
+@pytest.mark.parametrize("logger", ["hist-1s", "half-0.5pct"])
+@pytest.mark.parametrize("plant", ["A-classic-tustin-20Hz", "E-stiff5pct-classic-demand-25Hz"])
+def test_droop_from_normal_operation_over_seeds(plant, logger):
+    from fcrlive.analysis.identify import identify_signals
+
+    t = zoo.truth(plant)
+    errs, covered = [], 0
+    for seed in NORMAL_SEEDS:
+        sig = zoo.signals(plant, logger, minutes=60.0, seed=seed)
+        rep = identify_signals(sig, rated_mw=t.rated_mw, kd=t.kd, h=t.H)
+        assert rep.method == "lowband"
+        lo, hi = rep.droop.ci95
+        assert math.isfinite(lo) and math.isfinite(hi) and hi > lo  # never a zero-width interval
+        errs.append(100.0 * abs(rep.droop.value - t.droop))
+        covered += lo <= t.droop <= hi
+    assert covered >= 6, (covered, errs)
+    assert float(np.median(errs)) <= 0.2, errs
+
+
+def test_peaks_from_normal_operation_at_low_snr_are_not_identifiable():
+    # plant F (PID, flat peaks at 0.1-0.23 rad/s) through a historian with 0.5 % meter noise: u's swings
+    # near the peaks are buried in the meter noise (coherence ≈ 0.02); the answer must be a null with the
+    # measured reason, never a number
+    from fcrlive.analysis.identify import identify_signals
+
+    plant = "F-pid-classic-2pct-25Hz"
+    t = zoo.truth(plant)
+    rep = identify_signals(zoo.signals(plant, "hist-1s", minutes=60.0, seed=0), rated_mw=t.rated_mw,
+                           kd=t.kd, h=t.H)
+    assert rep.method == "lowband"
+    for key in ("max_abs_g1", "max_abs_s"):
+        q = getattr(rep, key)
+        assert q.value is None and tuple(q.ci95) == (None, None)
+        assert q.reason.startswith("not identifiable from this log: "), q.reason
+        assert "coherence" in q.reason or "edge of the band" in q.reason, q.reason
+        assert rep.not_identifiable[key] == q.reason
+    # the droop is still reported, with an interval
+    assert rep.droop.value is not None and math.isfinite(rep.droop.ci95[0])

@@ -88,16 +88,50 @@ class FreqResp:
 
     # ----------------------------------------------------------------- construction
     @classmethod
+    def _make(cls, omega: np.ndarray, value: np.ndarray, jac, sources: tuple) -> FreqResp:
+        """The constructor without :meth:`__post_init__`'s conversions and checks, for the algebra below,
+        whose operands are valid FreqResp already (omega float (n,), value complex (n,), jac complex
+        (n, P) matching the sources): the assessment builds ~20 000 responses per identification, most on
+        one ω, where the checks cost as much as the arithmetic. An empty grid takes the checked path.
+
+        ``jac`` may be a function returning it: it is then computed on the first access of ``jacobian``
+        (:meth:`__getattr__`). Most responses the TSO checks' searches build are asked only for their
+        value; the value never depends on the jacobian, and the jacobian, when asked, is the same
+        arithmetic on the same arrays as if computed at once."""
+        if omega.shape[0] == 0:
+            return cls(omega, value, jac() if callable(jac) else jac, sources)
+        obj = object.__new__(cls)
+        object.__setattr__(obj, "omega", omega)
+        object.__setattr__(obj, "value", value)
+        if callable(jac):
+            object.__setattr__(obj, "_jac_fn", jac)
+        else:
+            object.__setattr__(obj, "jacobian", jac)
+        object.__setattr__(obj, "sources", sources)
+        return obj
+
+    def __getattr__(self, name: str):
+        # only reached when normal lookup fails: a jacobian made lazily by _make, on its first access
+        if name == "jacobian":
+            fn = self.__dict__.pop("_jac_fn", None)
+            if fn is not None:
+                jac = fn()
+                object.__setattr__(self, "jacobian", jac)
+                return jac
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    @classmethod
     def known(cls, omega: np.ndarray, value: np.ndarray | complex) -> FreqResp:
         """A response known exactly (e.g. the controller G_c): no parameters, zero variance."""
         omega = np.atleast_1d(np.asarray(omega, dtype=float))
         value = np.broadcast_to(np.asarray(value, dtype=complex), omega.shape).copy()
-        return cls(omega, value, np.zeros((omega.shape[0], 0), complex), ())
+        return cls._make(omega, value, np.zeros((omega.shape[0], 0), complex), ())
 
     # ----------------------------------------------------------------- statistics
     @property
     def n_params(self) -> int:
-        return int(self.jacobian.shape[1])
+        # the columns of the jacobian, from the sources (equal by construction; no lazy jacobian computed)
+        return int(sum(c.shape[0] for _, c in self.sources))
 
     @property
     def covariance(self) -> np.ndarray:
@@ -149,23 +183,35 @@ class FreqResp:
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.imag(np.conj(self.value)[:, None] * self.jacobian) / a2[:, None]
 
+    def _cached(self, name: str, compute) -> np.ndarray:
+        """A copy of the value of ``compute()`` kept on this (immutable) response: the TSO checks ask the
+        sd of one response several times (value and bounds, both products)."""
+        c = self.__dict__.get("_sd_cache")
+        if c is None:
+            c = {}
+            object.__setattr__(self, "_sd_cache", c)
+        v = c.get(name)
+        if v is None:
+            v = c[name] = compute()
+        return v.copy()
+
     @property
     def sd_abs(self) -> np.ndarray:
         """Standard deviation of |G| (same units as |G|)."""
-        return np.sqrt(self._quad(np.nan_to_num(self._grad_abs())))
+        return self._cached("abs", lambda: np.sqrt(self._quad(np.nan_to_num(self._grad_abs()))))
 
     @property
     def sd_phase(self) -> np.ndarray:
         """Standard deviation of arg G [rad]."""
-        return np.sqrt(self._quad(np.nan_to_num(self._grad_phase())))
+        return self._cached("phase", lambda: np.sqrt(self._quad(np.nan_to_num(self._grad_phase()))))
 
     @property
     def sd_real(self) -> np.ndarray:
-        return np.sqrt(self._quad(np.real(self.jacobian)))
+        return self._cached("real", lambda: np.sqrt(self._quad(np.real(self.jacobian))))
 
     @property
     def sd_imag(self) -> np.ndarray:
-        return np.sqrt(self._quad(np.imag(self.jacobian)))
+        return self._cached("imag", lambda: np.sqrt(self._quad(np.imag(self.jacobian))))
 
     def ci95_abs(self) -> tuple[np.ndarray, np.ndarray]:
         """95 % band of |G|: |G| ∓ Z95·sd (lower edge clipped at 0)."""
@@ -205,6 +251,14 @@ class FreqResp:
         return FreqResp.known(self.omega, val)
 
     @staticmethod
+    def _union(x: FreqResp, y: FreqResp) -> tuple:
+        """The sources of a combination of x and y (:meth:`_align`'s third result)."""
+        if x.sources == () and y.sources == ():
+            return ()
+        keys = {k for k, _ in x.sources}
+        return (*x.sources, *(kc for kc in y.sources if kc[0] not in keys))
+
+    @staticmethod
     def _align(x: FreqResp, y: FreqResp) -> tuple[np.ndarray, np.ndarray, tuple]:
         """Both jacobians on the union of the sources (shared keys share columns)."""
         if x.sources == () and y.sources == ():
@@ -235,11 +289,14 @@ class FreqResp:
 
     def _binary(self, other, f, dfx, dfy) -> FreqResp:
         o = self._coerce(other)
-        jx, jy, src = self._align(self, o)
         x, y = self.value, o.value
         val = f(x, y)
-        jac = dfx(x, y)[:, None] * jx + dfy(x, y)[:, None] * jy
-        return FreqResp(self.omega, val, jac, src)
+
+        def jac():
+            jx, jy, _ = self._align(self, o)
+            return dfx(x, y)[:, None] * jx + dfy(x, y)[:, None] * jy
+
+        return FreqResp._make(self.omega, val, jac, self._union(self, o))
 
     def __add__(self, other) -> FreqResp:
         return self._binary(other, lambda x, y: x + y, lambda x, y: np.ones_like(x),
@@ -255,7 +312,7 @@ class FreqResp:
         return self._coerce(other) - self
 
     def __neg__(self) -> FreqResp:
-        return FreqResp(self.omega, -self.value, -self.jacobian, self.sources)
+        return FreqResp._make(self.omega, -self.value, lambda: -self.jacobian, self.sources)
 
     def __mul__(self, other) -> FreqResp:
         return self._binary(other, lambda x, y: x * y, lambda x, y: y, lambda x, y: x)
@@ -270,7 +327,8 @@ class FreqResp:
 
     def inv(self) -> FreqResp:
         """1 / G."""
-        return FreqResp(self.omega, 1.0 / self.value, -self.jacobian / self.value[:, None] ** 2, self.sources)
+        return FreqResp._make(self.omega, 1.0 / self.value, lambda: -self.jacobian / self.value[:, None] ** 2,
+                              self.sources)
 
     def one_minus(self) -> FreqResp:
         """1 − G (same as ``1 - G``)."""
@@ -278,4 +336,4 @@ class FreqResp:
 
     def conj(self) -> FreqResp:
         """Complex conjugate (not holomorphic: ∂Ḡ/∂θ = conj(∂G/∂θ) because θ is real)."""
-        return FreqResp(self.omega, np.conj(self.value), np.conj(self.jacobian), self.sources)
+        return FreqResp._make(self.omega, np.conj(self.value), lambda: np.conj(self.jacobian), self.sources)

@@ -24,6 +24,7 @@ the model structure contains the true system and the data are informative).
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -36,6 +37,26 @@ from fcrlive.ident.arx import arx, per_input
 from fcrlive.ident.data import IdData
 from fcrlive.ident.errors import OrderError, TooFewSamplesError, UnstableModelError
 from fcrlive.ident.poly import EstimationReport, PolyModel
+
+try:  # scipy's C filter behind lfilter; lfilter's array-API dispatch and checks cost more than it on
+    # the short records here (a search filters ~20 000 times)
+    from scipy.signal._sigtools import _linear_filter
+except ImportError:  # pragma: no cover - a scipy without it: the public function
+    _linear_filter = None
+
+
+def _filt(b, a, x, axis: int = -1) -> np.ndarray:
+    """``scipy.signal.lfilter(b, a, x, axis)`` for float arrays (b, a 1-D numpy), bit for bit the same.
+
+    lfilter hands a denominator of length > 1 to the C filter unchanged; a length-1 one (FIR) takes
+    lfilter's convolution path, so that case, and a scipy without the C entry point, use lfilter itself.
+    """
+    if _linear_filter is None or len(a) == 1:
+        return sps.lfilter(b, a, x, axis=axis)
+    if type(b) is not np.ndarray:
+        b = np.atleast_1d(np.asarray(b, float))
+    return _linear_filter(b, a, x, axis)
+
 
 _ROOT_MAX = 1.0 - 1e-7
 """A polynomial counts as stable when all roots are inside this radius (strictly inside the circle)."""
@@ -187,10 +208,10 @@ def _residuals(st: _Struct, th: np.ndarray, segs):
         v = y.copy()
         ws = []
         for i in range(st.nu):
-            w = sps.lfilter(B[i], F[i], u[:, i])
+            w = _filt(B[i], F[i], u[:, i])
             v -= w
             ws.append(w)
-        e = sps.lfilter(D, C, v) if noise else v
+        e = _filt(D, C, v) if noise else v
         eps[r:r + L] = e
         ip = None
         if st.ic:
@@ -221,10 +242,10 @@ def _jacobian(st: _Struct, segs, aux) -> np.ndarray:
         for i in range(st.nu):
             CF = np.convolve(C, F[i])
             if st.nf[i]:
-                xz = sps.lfilter(D, CF, np.column_stack((u[:, i], ws[i])), axis=0)
+                xz = _filt(D, CF, np.column_stack((u[:, i], ws[i])), axis=0)
                 x, z = xz[:, 0], xz[:, 1]
             else:
-                x = sps.lfilter(D, CF, u[:, i]) if noise else u[:, i]
+                x = _filt(D, CF, u[:, i]) if noise else u[:, i]
             s = st.b_sl(i).start
             for j in range(st.nb[i]):
                 _shifted(J[r:r + L, s + j], x, st.nk[i] + j, -1.0)
@@ -232,11 +253,11 @@ def _jacobian(st: _Struct, segs, aux) -> np.ndarray:
             for k in range(1, st.nf[i] + 1):
                 _shifted(J[r:r + L, s + k - 1], z, k, 1.0)
         if st.nc:
-            g = sps.lfilter(_ONE, C, e)
+            g = _filt(_ONE, C, e)
             for k in range(1, st.nc + 1):
                 _shifted(J[r:r + L, st.c_sl.start + k - 1], g, k, -1.0)
         if st.nd:
-            h = sps.lfilter(_ONE, C, v)
+            h = _filt(_ONE, C, v)
             for k in range(1, st.nd + 1):
                 _shifted(J[r:r + L, st.d_sl.start + k - 1], h, k, 1.0)
         if ip is not None:
@@ -286,14 +307,16 @@ class _IcProjection:
             m = min(max(st.nf[i], st.nk[i] + st.nb[i] - 1), L)
             if m == 0:
                 continue
-            h = sps.lfilter(_ONE, F[i], _unit_impulse(L))
+            h = _filt(_ONE, F[i], _unit_impulse(L))
             if noise:
-                h = sps.lfilter(D, C, h)
+                h = _filt(D, C, h)
             resp.append((h, m))
         mc = min(max(st.nc, st.nd), L)
         if mc:
-            resp.append((sps.lfilter(_ONE, C, _unit_impulse(L)), mc))
-        Phi = np.empty((L, 1 + sum(m for _, m in resp)))
+            resp.append((_filt(_ONE, C, _unit_impulse(L)), mc))
+        # Fortran order: the columns are written one by one and the SVD takes its input column-major (a
+        # C-order matrix costs it a transposing copy, a third of its time); the values are the same
+        Phi = np.empty((L, 1 + sum(m for _, m in resp)), order="F")
         Phi[:, 0] = 1.0
         c = 1
         for h, m in resp:
@@ -310,6 +333,9 @@ class _IcProjection:
         X -= self.Q @ (self.Q.T @ X)
 
 
+_potrf, _potrs = sla.lapack.dpotrf, sla.lapack.dpotrs
+
+
 def _ls(X: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Least squares by column-scaled normal equations (fast; used for initial values and GN directions).
 
@@ -319,14 +345,14 @@ def _ls(X: np.ndarray, y: np.ndarray) -> np.ndarray:
     scale[scale == 0] = 1.0
     G = (X.T @ X) / np.outer(scale, scale)
     g = (X.T @ y) / scale
-    try:
-        c = sla.cho_factor(G, check_finite=False)
-        if np.min(np.abs(np.diag(c[0]))) < 1e-7:
-            raise np.linalg.LinAlgError
-        sol = sla.cho_solve(c, g, check_finite=False)
-    except (np.linalg.LinAlgError, sla.LinAlgError):
-        sol = np.linalg.lstsq(X / scale, y, rcond=None)[0]
-    return sol / scale
+    # LAPACK's Cholesky directly, with the arguments cho_factor/cho_solve(check_finite=False) pass it (the
+    # same routines, bit for bit; their wrappers cost more than the solve of these small systems)
+    c, info = _potrf(G, lower=0, overwrite_a=0, clean=0)
+    if info == 0 and not np.min(np.abs(np.diag(c))) < 1e-7:
+        sol, info = _potrs(c, g, lower=0, overwrite_b=0)
+        if info == 0:
+            return sol / scale
+    return np.linalg.lstsq(X / scale, y, rcond=None)[0] / scale
 
 
 # ===================================================================== search
@@ -335,13 +361,16 @@ class _SearchResult:
     theta: np.ndarray
     ssr: float
     iterations: int
-    converged: bool
+    converged: bool | None
+    """The statistical verdict (:func:`_final_verdict`); None while not yet judged (:func:`_judged`)."""
     stop_reason: str
     algorithm: str
     eps: np.ndarray
     """ε at ``theta``, and below what :func:`_jacobian` needs there: the multistart's tests and the
     covariance use them instead of evaluating that point again."""
     aux: tuple
+    jac: np.ndarray | None = None
+    """J at ``theta`` when the search or the verdict computed it (None: not computed), for the covariance."""
 
 
 def _gn_step(J: np.ndarray, eps: np.ndarray) -> np.ndarray:
@@ -364,33 +393,46 @@ SAME_LOSS = 1e-2
 multistart keeps the earlier start (a deterministic tie-break instead of a rounding coin toss)."""
 
 
-def _final_verdict(st: _Struct, th: np.ndarray, eps: np.ndarray, aux, segs, V: float) -> bool:
-    """Converged to statistical accuracy (:data:`STAT_TOL`): the Gauss-Newton predicted decrease at θ."""
+def _final_verdict(st: _Struct, th: np.ndarray, eps: np.ndarray, aux, segs, V: float,
+                   J: np.ndarray | None = None) -> tuple[bool, np.ndarray | None]:
+    """Converged to statistical accuracy (:data:`STAT_TOL`): the Gauss-Newton predicted decrease at θ.
+
+    Returns the verdict and J at θ (``J`` when given, computed otherwise; None if that failed)."""
     n = eps.shape[0]
     if not (np.isfinite(V) and V > 0):
-        return False
+        return False, J
     try:
-        J = _jacobian(st, segs, aux)
+        if J is None:
+            J = _jacobian(st, segs, aux)
         delta = _gn_step(J, eps)
     except (np.linalg.LinAlgError, ValueError):
-        return False
+        return False, J
     if not np.all(np.isfinite(delta)):
-        return False
+        return False, J
     pred = float(np.sum((J @ delta) ** 2))
-    return pred <= STAT_TOL * V / n
+    return pred <= STAT_TOL * V / n, J
 
 
 def _search(st: _Struct, th0: np.ndarray, segs, maxiter: int = 100, tol: float = 1e-10) -> _SearchResult:
     """Gauss-Newton with step halving and stability guard; Levenberg-Marquardt fallback.
 
-    ``converged`` of the result is the statistical verdict of :func:`_final_verdict` at the end point
-    (the stop reason still says why the iteration stopped)."""
+    ``converged`` of the result is True when the iteration stopped on "predicted relative loss decrease
+    below tolerance", otherwise None: the statistical verdict of :func:`_final_verdict` at the end point
+    is computed by :func:`_judged` only for the search the multistart keeps (it costs a Jacobian)."""
     r = _search_iter(st, th0, segs, maxiter, tol)
     # "predicted decrease below tol·V" implies the verdict (tol·V ≪ STAT_TOL·V/N); every other stop
     # (a last step that lowered V by ~1e-10 relative, LM without descent, the iteration limit) is judged
     # at the end point, not by how the last step's rounding fell
-    ok = r.stop_reason.startswith("predicted") or _final_verdict(st, r.theta, r.eps, r.aux, segs, r.ssr)
-    return _SearchResult(r.theta, r.ssr, r.iterations, bool(ok), r.stop_reason, r.algorithm, r.eps, r.aux)
+    ok = True if r.stop_reason.startswith("predicted") else None
+    return _SearchResult(r.theta, r.ssr, r.iterations, ok, r.stop_reason, r.algorithm, r.eps, r.aux, r.jac)
+
+
+def _judged(st: _Struct, r: _SearchResult, segs) -> _SearchResult:
+    """``r`` with its verdict (:func:`_final_verdict`) and J at its end point."""
+    if r.converged is not None:
+        return r
+    ok, J = _final_verdict(st, r.theta, r.eps, r.aux, segs, r.ssr, r.jac)
+    return _SearchResult(r.theta, r.ssr, r.iterations, bool(ok), r.stop_reason, r.algorithm, r.eps, r.aux, J)
 
 
 def _search_iter(st: _Struct, th0: np.ndarray, segs, maxiter: int, tol: float) -> _SearchResult:
@@ -435,13 +477,15 @@ def _search_iter(st: _Struct, th0: np.ndarray, segs, maxiter: int, tol: float) -
             eps, V, aux = e2, V2, aux2
             if rel <= tol and mu * np.linalg.norm(delta) <= 1e-8 * (1 + np.linalg.norm(th)):
                 converged, reason = True, "relative loss decrease and step below tolerance"
+                J = None  # not evaluated at the new θ
                 break
             J = _jacobian(st, segs, aux)
         else:
-            th, V, k, converged, reason, eps, aux = _lm(st, th, eps, aux, J, V, segs, maxiter - it + 1, tol)
+            th, V, k, converged, reason, eps, aux, J = _lm(st, th, eps, aux, J, V, segs, maxiter - it + 1,
+                                                           tol)
             it += k
             break
-    return _SearchResult(th, V, it, converged, reason, algorithm, eps, aux)
+    return _SearchResult(th, V, it, converged, reason, algorithm, eps, aux, J)
 
 
 def _lm(st, th, eps, aux, J, V, segs, maxiter, tol):
@@ -469,7 +513,8 @@ def _lm(st, th, eps, aux, J, V, segs, maxiter, tol):
             rel = (V - V2) / V
             th, V, eps, aux = cand, V2, e2, aux2
             if rel <= tol:
-                return th, V, k, True, "Levenberg-Marquardt: relative loss decrease below tolerance", eps, aux
+                return (th, V, k, True, "Levenberg-Marquardt: relative loss decrease below tolerance", eps,
+                        aux, None)
             J = _jacobian(st, segs, aux)
             H = J.T @ J
             g = J.T @ eps
@@ -483,8 +528,9 @@ def _lm(st, th, eps, aux, J, V, segs, maxiter, tol):
                 gn = float(np.abs(g).max() / np.sqrt(V + 1e-300))
                 return th, V, k, gn < 1e-6 * np.sqrt(np.diag(H).max()), (
                     "Levenberg-Marquardt: no descent even with maximal damping"
-                ), eps, aux
-    return th, V, k, False, f"Levenberg-Marquardt: maximum number of iterations ({maxiter}) reached", eps, aux
+                ), eps, aux, J
+    return (th, V, k, False, f"Levenberg-Marquardt: maximum number of iterations ({maxiter}) reached", eps,
+            aux, J)
 
 
 # ===================================================================== initial values
@@ -496,8 +542,8 @@ def _sm(segs_target, nb: int, nf: int, nk: int, iters: int = 12) -> tuple[np.nda
     for _ in range(iters if nf else 1):
         rows = []
         for us, ys in segs_target:
-            uf = sps.lfilter([1.0], F, us)
-            yf = sps.lfilter([1.0], F, ys)
+            uf = _filt([1.0], F, us)
+            yf = _filt([1.0], F, ys)
             L = ys.shape[0]
             n0 = max(nf, nk + nb - 1)
             if L - n0 <= 0:
@@ -543,7 +589,7 @@ def _hannan_rissanen(v_segs, nc: int, nd: int, n_ar: int) -> tuple[np.ndarray, n
     a = _ls(X[:, :-1], X[:, -1])
     Aar = np.concatenate(([1.0], a))
     for v in v_segs:
-        ehat.append(sps.lfilter(Aar, [1.0], v))
+        ehat.append(_filt(Aar, [1.0], v))
     m = max(nc, nd)
     for v, e in zip(v_segs, ehat):
         L = v.shape[0]
@@ -570,14 +616,47 @@ def _add_noise_model(st: _Struct, segs, Bs, Fs, n_ar: int) -> np.ndarray:
     for y, u in segs:
         v = y.copy()
         for i in range(st.nu):
-            v -= sps.lfilter(Bs[i], Fs[i], u[:, i])
+            v -= _filt(Bs[i], Fs[i], u[:, i])
         v_segs.append(v)
     C, D = _hannan_rissanen(v_segs, st.nc, st.nd, n_ar)
     return st.pack(Bs, Fs, C, D)
 
 
-def _start_simulated(st: _Struct, segs, ha: PolyModel, n_ar: int) -> np.ndarray:
-    """Start 1: Steiglitz-McBride of each B_i/F_i on the high-order ARX's noise-free output of u_i."""
+START_CACHE_SETS = 2
+"""Data sets whose high-order ARX models and Steiglitz-McBride starts :func:`_pem` keeps (Z_u fits five
+candidate orders on one data set: the same ARX for each, the same B/F start for equal nb, nf)."""
+_START_CACHE: OrderedDict = OrderedDict()
+
+
+def _start_cache(data: IdData) -> dict:
+    """The cache of start models for ``data``, by content (the arrays as bytes: a data set equal sample
+    for sample gets the same starts, a changed one never the old ones), the last START_CACHE_SETS."""
+    key = (data.Ts, data.starts, data.u.shape, data.y.tobytes(), data.u.tobytes())
+    c = _START_CACHE.get(key)
+    if c is None:
+        c = _START_CACHE[key] = {}
+        while len(_START_CACHE) > START_CACHE_SETS:
+            _START_CACHE.popitem(last=False)
+    else:
+        _START_CACHE.move_to_end(key)
+    return c
+
+
+def _cached(cache: dict | None, key, make):
+    """``cache[key]``, made by ``make()`` on a miss (no cache: ``make()``)."""
+    if cache is None:
+        return make()
+    v = cache.get(key)
+    if v is None:
+        v = cache[key] = make()
+    return v
+
+
+def _start_simulated(st: _Struct, segs, ha: PolyModel, n_ar: int, cache: dict | None = None,
+                     tag=None) -> np.ndarray:
+    """Start 1: Steiglitz-McBride of each B_i/F_i on the high-order ARX's noise-free output of u_i.
+
+    ``cache``/``tag``: :func:`_start_cache` and the key of ``ha`` in it (the B_i/F_i are kept by orders)."""
     Bs, Fs = [], []
     # a high-order ARX fitted in closed loop can have an unstable A: simulate with A's roots reflected
     # inside (|A| scaled by 1/Π|r|, compensated on B) so the noise-free output stays bounded
@@ -588,17 +667,26 @@ def _start_simulated(st: _Struct, segs, ha: PolyModel, n_ar: int) -> np.ndarray:
         gain = float(np.prod(np.maximum(np.abs(r), 1.0)))
         A = _reflect(A)
     for i in range(st.nu):
-        tgt = [(u[:, i], sps.lfilter(ha.b[i] / gain, A, u[:, i])) for _, u in segs]
-        B, F = _sm(tgt, st.nb[i], st.nf[i], st.nk[i])
+        def sm(i=i):
+            tgt = [(u[:, i], _filt(ha.b[i] / gain, A, u[:, i])) for _, u in segs]
+            return _sm(tgt, st.nb[i], st.nf[i], st.nk[i])
+        B, F = _cached(cache, ("sm", tag, i, st.nb[i], st.nf[i], st.nk[i]), sm)
         Bs.append(B)
         Fs.append(F)
     return _add_noise_model(st, segs, Bs, Fs, n_ar)
 
 
-def _start_whitened(st: _Struct, segs, ha: PolyModel, n_ar: int) -> np.ndarray:
-    """Start 2: Steiglitz-McBride on the ARX-whitened data (A_h y, A_h u); inputs in turn (backfitting)."""
+def _start_whitened(st: _Struct, segs, ha: PolyModel, n_ar: int, cache: dict | None = None,
+                    tag=None) -> np.ndarray:
+    """Start 2: Steiglitz-McBride on the ARX-whitened data (A_h y, A_h u); inputs in turn (backfitting).
+    ``cache``/``tag`` as :func:`_start_simulated`."""
+    Bs, Fs = _cached(cache, ("whitened", tag, st.nb, st.nf, st.nk), lambda: _whitened_bf(st, segs, ha))
+    return _add_noise_model(st, segs, list(Bs), list(Fs), n_ar)
+
+
+def _whitened_bf(st: _Struct, segs, ha: PolyModel) -> tuple[list, list]:
     nu = st.nu
-    wsegs = [(sps.lfilter(ha.a, [1.0], y), sps.lfilter(ha.a, [1.0], u, axis=0)) for y, u in segs]
+    wsegs = [(_filt(ha.a, [1.0], y), _filt(ha.a, [1.0], u, axis=0)) for y, u in segs]
     Bs = [np.zeros(st.nk[i] + st.nb[i]) for i in range(nu)]
     Fs = [np.ones(1) for _ in range(nu)]
     for _sweep in range(2 if nu > 1 else 1):
@@ -608,10 +696,10 @@ def _start_whitened(st: _Struct, segs, ha: PolyModel, n_ar: int) -> np.ndarray:
                 t = yw.copy()
                 for j in range(nu):
                     if j != i:
-                        t -= sps.lfilter(Bs[j], Fs[j], uw[:, j])
+                        t -= _filt(Bs[j], Fs[j], uw[:, j])
                 tgt.append((uw[:, i], t))
             Bs[i], Fs[i] = _sm(tgt, st.nb[i], st.nf[i], st.nk[i])
-    return _add_noise_model(st, segs, Bs, Fs, n_ar)
+    return Bs, Fs
 
 
 def _real_roots(st: _Struct, th: np.ndarray) -> np.ndarray:
@@ -750,20 +838,26 @@ def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, mult
     if init is not None:
         starts = [_from_init(st, init)]
     else:
-        ha = arx(data, max(n_high, max(st.nf) + max(st.nb), 2), max(n_high, max(st.nb) + 1), st.nk)
+        cache = _start_cache(data)
+
+        def arx_cached(na: int, nb: int):
+            key = ("arx", na, nb, st.nk)
+            return key, _cached(cache, key, lambda: arx(data, na, nb, st.nk))
+
+        tag, ha = arx_cached(max(n_high, max(st.nf) + max(st.nb), 2), max(n_high, max(st.nb) + 1))
         arx_loss = ha.report.loss
         # the rows the ARX loss is computed on (its initial samples of each experiment left out)
         n0 = max(ha.na, *(k + m - 1 for k, m in zip(ha.nk, ha.nb)))
         arx_rows = np.concatenate([np.arange(a + n0, b) for a, b in data.bounds])
         lr_limit = float(stats.chi2.ppf(0.95, max(ha.n_params - st.p, 1)))
-        starts = [_start_simulated(st, segs, ha, n_ar)]
-        lazy.append(lambda: _start_whitened(st, segs, ha, n_ar))
+        starts = [_start_simulated(st, segs, ha, n_ar, cache, tag)]
+        lazy.append(lambda: _start_whitened(st, segs, ha, n_ar, cache, tag))
         if ha.na > 8:
             # a shorter whitening ARX leads the Steiglitz-McBride start into another basin at times
             def shorter():
-                return _start_simulated(
-                    st, segs, arx(data, max(ha.na // 2, max(st.nf) + max(st.nb), 2),
-                                  max(ha.nb[0] // 2, max(st.nb) + 1), st.nk), n_ar)
+                tag_s, ha_s = arx_cached(max(ha.na // 2, max(st.nf) + max(st.nb), 2),
+                                         max(ha.nb[0] // 2, max(st.nb) + 1))
+                return _start_simulated(st, segs, ha_s, n_ar, cache, tag_s)
             lazy.append(shorter)
     if not np.all(np.isfinite(starts[0])) or not _stable(st, starts[0]):
         raise UnstableModelError(f"initial {method.upper()} model could not be stabilised")
@@ -782,6 +876,9 @@ def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, mult
             best = r
 
     def stalled(r: _SearchResult) -> bool:
+        nonlocal best
+        if r is best:
+            r = best = _judged(st, best, segs)
         if not r.converged:
             return True
         # a root pinned at the stability boundary: the search was stopped by the guard, not by a minimum
@@ -814,8 +911,10 @@ def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, mult
             run(make())
             if multistart == "auto" and not stalled(best) and len(results) >= 2:
                 break
+    best = _judged(st, best, segs)
     th = best.theta
-    eps, J = best.eps, _jacobian(st, segs, best.aux)
+    eps = best.eps
+    J = best.jac if best.jac is not None else _jacobian(st, segs, best.aux)
     ssr = float(eps @ eps)
     lam = ssr / (n - st.p)
     cov = _covariance(J, lam) if covariance == "gauss" else _sandwich(J, eps, data.bounds)

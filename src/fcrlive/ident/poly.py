@@ -277,27 +277,37 @@ class PolyModel:
         omega = np.atleast_1d(np.asarray(omega_rad_s, dtype=float))
         zi = np.exp(-1j * omega * self.Ts)
         A = polyval_zinv(self.a, zi)
-        s = self.slices()
-        jac = np.zeros((omega.size, self.n_params), complex)
-        powers = np.arange(1, 1 + max(self.na, self.nc, self.nd, *self.nf, 1))
-        zk = zi[:, None] ** powers[None, :]
         if input == "noise":
             C, D = polyval_zinv(self.c, zi), polyval_zinv(self.d, zi)
             G = C / (A * D)
-            jac[:, s["a"]] = -(G / A)[:, None] * zk[:, :self.na]
-            jac[:, s["c"]] = (1.0 / (A * D))[:, None] * zk[:, :self.nc]
-            jac[:, s["d"]] = -(G / D)[:, None] * zk[:, :self.nd]
         else:
             i = self._input(input)
             B, F = polyval_zinv(self.b[i], zi), polyval_zinv(self.f[i], zi)
             G = B / (A * F)
+
+        def jacobian() -> np.ndarray:
+            # computed when first asked (FreqResp._make): a search over ω asks most responses only for G
+            s = self.slices()
+            jac = np.zeros((omega.size, self.n_params), complex)
+            powers = np.arange(1, 1 + max(self.na, self.nc, self.nd, *self.nf, 1))
+            zk = zi[:, None] ** powers[None, :]
             jac[:, s["a"]] = -(G / A)[:, None] * zk[:, :self.na]
-            k = self.nk[i]
-            bpow = np.arange(k, k + self.nb[i])
-            jac[:, s[("b", i)]] = (1.0 / (A * F))[:, None] * zi[:, None] ** bpow[None, :]
-            jac[:, s[("f", i)]] = -(G / F)[:, None] * zk[:, :self.nf[i]]
+            if input == "noise":
+                jac[:, s["c"]] = (1.0 / (A * D))[:, None] * zk[:, :self.nc]
+                jac[:, s["d"]] = -(G / D)[:, None] * zk[:, :self.nd]
+            else:
+                k = self.nk[i]
+                bpow = np.arange(k, k + self.nb[i])
+                jac[:, s[("b", i)]] = (1.0 / (A * F))[:, None] * zi[:, None] ** bpow[None, :]
+                jac[:, s[("f", i)]] = -(G / F)[:, None] * zk[:, :self.nf[i]]
+            return jac
+
         cov = self.covariance if self.covariance is not None else np.full((self.n_params,) * 2, np.nan)
-        return FreqResp(omega, G, jac, ((self.uid, cov),))
+        src = ((self.uid, cov),)
+        # checked construction only for what FreqResp would reject (a grid that is not 1-D)
+        if omega.ndim != 1:
+            return FreqResp(omega, G, jacobian(), src)
+        return FreqResp._make(omega, G, jacobian, src)
 
     def static_gain(self, input: int | str = 0) -> tuple[float, float]:
         """(G_i(1), sd) — the DC gain of input i and its standard deviation."""
