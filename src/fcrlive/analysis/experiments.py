@@ -697,7 +697,7 @@ def zcu_swing(
     else:
         notes.append(f"jackknife of G_jp not possible ({len(jk)} of {JACKKNIFE_BLOCKS} refits succeeded): "
                      "intervals from the covariance alone")
-    ni = _delay_check(d, m_cu, o_best, responses, controller_of, G_J_of, prep.Ts)
+    ni = _delay_check(d, m_cu, o_best, responses, controller_of, G_J_of, prep.Ts, notes)
     return ExperimentResult(
         "zcu", prep.Ts, d.N, prep.duration_s, {"y+G_J u<-c": m_cu, "a<-c": m_ca}, responses,
         ("G_1", "S", "G_p"), ctl, val, tuple(warns), tuple(notes), ni,
@@ -787,7 +787,7 @@ def _swing_jackknife(d: IdData, m: PolyModel) -> list[PolyModel]:
 
 
 def _delay_check(d: IdData, m: PolyModel, order: tuple[int, int], responses: Responses, controller_of,
-                 G_J_of, Ts: float) -> dict[str, str]:
+                 G_J_of, Ts: float, notes: list[str]) -> dict[str, str]:
     """``not_identifiable`` entries when max|S| or max|G_1| depend on the assumed input delay of G_jp.
 
     G_jp is refitted with one more sample of delay (nk = 2, from the fit with its numerator delayed).
@@ -809,17 +809,22 @@ def _delay_check(d: IdData, m: PolyModel, order: tuple[int, int], responses: Res
         return _loop_values(m2.freqresp(w, 0).value, controller_of(w).value, G_J_of(w))
 
     ni: dict[str, str] = {}
+    seen = []
     for key, rkey, label in (("S", "max_abs_s", "max|S|"), ("G_1", "max_abs_g1", "max|G_1|")):
         pk = uncertain_peak(lambda w, k=key: responses(w)[k], OMEGA_MIN, w_hi, 1000)
         lo, hi = pk.ci95()
         v2, _ = peak(lambda w, k=key: np.abs(loop2(w)[k]), OMEGA_MIN, w_hi, 1000)
+        seen.append(f"{label} {pk.value:.4g} [{lo:.4g}, {hi:.4g}] → {v2:.4g}")
         if abs(v2 / pk.value - 1.0) > DELAY_CHECK_SHIFT and not lo <= v2 <= hi:
-            why = (f"not identifiable from this log (model structure): {label} depends on the assumed delay "
-                   f"of G_jp = y/c, {pk.value:.3g} [{lo:.3g}, {hi:.3g}] with {m.nk[0]} sample(s) of "
-                   f"{Ts:g} s, {v2:.3g} with {m.nk[0] + 1}")
+            why = (f"not identifiable from this log (model structure): {label} depends on the assumed input "
+                   f"delay of G_jp = y/c: {pk.value:.3g} [{lo:.3g}, {hi:.3g}] with a delay of {m.nk[0]} "
+                   f"sample ({m.nk[0] * Ts:g} s), {v2:.3g} with {m.nk[0] + 1} samples")
             ni[rkey] = why
             if key == "S":  # G_p and the TSO checks come from the same loop
                 ni["gp"] = ni["tso"] = why
+    dl = d.N * np.log(m2.report.loss / m.report.loss)
+    notes.append(f"delay check (G_jp refitted with {m.nk[0] + 1} samples of input delay, N log V2/V1 = "
+                 f"{dl:.1f}): " + "; ".join(seen))
     return ni
 
 
