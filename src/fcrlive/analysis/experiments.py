@@ -671,8 +671,9 @@ def zcu_swing(
 
     G_J_of = lambda w: 1.0 / (2.0 * H * 1j * w + kd)  # noqa: E731
 
-    def controller_of(w: np.ndarray) -> FreqResp:
-        G_s = m_ca.freqresp(w, 0)
+    def controller_of(w: np.ndarray, G_s: FreqResp | None = None) -> FreqResp:
+        """c/ε with the droop loop closed (G_s: the servo's response at w, fitted a ← c)."""
+        G_s = m_ca.freqresp(w, 0) if G_s is None else G_s
         if ctl.digital is not None:
             return ctl.digital.C(w, G_s)
         x = G_s if ctl.signal == "gate" else 1.0
@@ -685,7 +686,7 @@ def zcu_swing(
         G_jp = m_cu.freqresp(w, 0) * model_error(w)
         G_J = FreqResp.known(w, G_J_of(w))
         G_s = m_ca.freqresp(w, 0)
-        C = controller_of(w)
+        C = controller_of(w, G_s)
         L = G_jp * C
         S = 1.0 / (1.0 + L)
         out = {"G_1": G_J * S, "S": S, "G_p": L / G_J, "G_J": G_J, "G_jp": G_jp, "G_s": G_s}
@@ -706,7 +707,7 @@ def zcu_swing(
         notes.append("intervals of S, G_1 and G_p from the covariance alone (jackknife switched off)")
     elif len(jk) >= JACKKNIFE_MIN_FITS:
         notes.append(f"intervals of S, G_1 and G_p: the larger of the covariance's and a {len(jk)}-block "
-                     "jackknife of G_jp (above 0.01 rad/s)")
+                     "jackknife of G_jp (faded in from 0.005 to 0.01 rad/s)")
     else:
         notes.append(f"jackknife of G_jp not possible ({len(jk)} of {JACKKNIFE_BLOCKS} refits succeeded): "
                      "intervals from the covariance alone")
@@ -813,7 +814,9 @@ def _delay_check(d: IdData, m: PolyModel, order: tuple[int, int], responses: Res
     try:
         m2 = oe(d, order[0], order[1], m.nk[0] + 1, init=_pulled_in(m, m.nk[0] + 1), multistart=False,
                 maxiter=JACKKNIFE_MAXITER, ic="estimate", covariance="gauss")
-    except (IdentError, ValueError, np.linalg.LinAlgError):
+    except (IdentError, ValueError, np.linalg.LinAlgError) as exc:
+        notes.append(f"delay check not possible (the refit with {m.nk[0] + 1} samples of delay failed: "
+                     f"{exc})")
         return {}
     w_hi = peak_band(Ts)[1]
 
