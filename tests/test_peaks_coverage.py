@@ -81,3 +81,15 @@ def test_a_log_where_the_delay_does_not_matter_keeps_everything():
     assert jk.not_identifiable == {}
     a = assess(jk, kd=zoo.truth("A-classic-tustin-20Hz").kd)
     assert a.not_identifiable == {} and a.tso is not None and a.sensitivity is not None
+
+
+def test_delay_check_withholds_max_g1_and_eq10_on_their_own_reason():
+    # a Kd = 0 unit at 0.1 % meter noise (zoo B, seed 1): max|G_1| 0.65 with one sample of delay, 0.80 with
+    # two; max|S| moves as well (its droop is withheld by the width rule: a weak log all round)
+    sig, tr = _signals("B-int-beuler-10Hz", 1, "ctl-0.1pct")
+    rep = identify_signals(sig, rated_mw=tr.rated_mw, kd=tr.kd, h=tr.H)
+    why = rep.not_identifiable["max_abs_g1"]
+    assert why.startswith("not identifiable") and "max|G_1| depends on the assumed input delay" in why
+    assert rep.max_abs_g1.value is None and rep.max_abs_g1.reason == why
+    assert "max|S| depends" in rep.not_identifiable["max_abs_s"]
+    assert rep.local is None  # eq. 9-10 and the margins come from the same S, G_1 and loop

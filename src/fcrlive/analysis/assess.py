@@ -180,7 +180,8 @@ def assess(
         warns.append(f"identified G_1(1) = {g:.3g} is not positive: no droop")
     max_g1 = _peak(fr, "G_1", wpk)
     G1c = _callable(fr, "G_1")
-    dist = local.check_disturbance_rejection(G1c, omega_range=band)
+    # eq. 10 comes from the same G_1 as max|G_1|
+    dist = None if "max_abs_g1" in ni else local.check_disturbance_rejection(G1c, omega_range=band)
     max_s = sens = margins = None
     gp = f = tso = None
     F = F_sd = None
