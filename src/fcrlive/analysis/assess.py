@@ -103,6 +103,8 @@ class Assessment:
     """ω → dict of FreqResp (closed-loop methods), for plots."""
     F_callable: object = field(default=None, compare=False)
     F_sd_callable: object = field(default=None, compare=False)
+    not_identifiable: dict[str, str] = field(default_factory=dict)
+    """Report key → reason, from the experiment (ExperimentResult.not_identifiable): null in the report."""
 
 
 def _peak(fr_fun, key: str, omega_max: float) -> PeakEstimate:
@@ -161,6 +163,7 @@ def assess(
     if isinstance(result, SineExperiment):
         return _assess_sine(result, t_fme_s=t_fme_s, products=products)
     warns = list(result.warnings)
+    ni = dict(result.not_identifiable)
     fr = _memo(result.responses)
     wmax = result.omega_max * 0.999
     band = peak_band(result.Ts, peak_min_period_s)
@@ -177,7 +180,8 @@ def assess(
         warns.append(f"identified G_1(1) = {g:.3g} is not positive: no droop")
     max_g1 = _peak(fr, "G_1", wpk)
     G1c = _callable(fr, "G_1")
-    dist = local.check_disturbance_rejection(G1c, omega_range=band)
+    # eq. 10 comes from the same G_1 as max|G_1|
+    dist = None if "max_abs_g1" in ni else local.check_disturbance_rejection(G1c, omega_range=band)
     max_s = sens = margins = None
     gp = f = tso = None
     F = F_sd = None
@@ -205,7 +209,9 @@ def assess(
             tso = assess_tso(F, products=products, omega_wide=(1e-4, wmax), F_sd=F_sd)
         else:
             warns.append(f"identified G_p(0) = {gp0:.3g} is not positive: TSO checks skipped")
-        if not sens.passed:
+        if "max_abs_s" in ni:  # eq. 9 and the margins come from the same S and loop
+            sens = margins = None
+        elif not sens.passed:
             warns.append(f"local stability (eq. 9): max|S| = {sens.max_s:.3f} ≥ M_s = {sens.ms:g}")
     return Assessment(
         result.method,
@@ -226,6 +232,7 @@ def assess(
         fr,
         F,
         F_sd,
+        ni,
     )
 
 

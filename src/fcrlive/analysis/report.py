@@ -185,7 +185,7 @@ def build_report(
     data_quality: dict | None = None,
 ) -> IdentifyReport:
     """The report of an assessment; ``not_identifiable`` (quantity -> reason) nulls those quantities."""
-    ni = dict(not_identifiable or {})
+    ni = {**getattr(a, "not_identifiable", {}), **(not_identifiable or {})}
     droop = g1s = mg1 = ms = None
     if a.droop is not None:
         droop = ValueCI(value=_f(a.droop.value), ci95=(_f(a.droop.lo), _f(a.droop.hi)))
