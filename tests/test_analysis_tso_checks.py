@@ -273,3 +273,17 @@ def test_margin_and_ratio_refinement_agree_with_brent(plant):
         lambda x: -tc._ratio_fun(F(x), g_perf(x), tc.disturbance_profile(x), None, 1.0, tc.PERFORMANCE_MARGIN,
                                  0.0), log_grid(1e-4, 10.0, 3000))
     assert p.ratio == pytest.approx(-neg, rel=1e-10) and p.omega == pytest.approx(w_ref, rel=1e-6)
+
+
+def test_a_ratio_bound_whose_denominator_reaches_zero_is_unbounded():
+    # an sd of F as large as |1 + F G|/|G| somewhere clips the bound's denominator to 0 there: the bound is
+    # inf (no finite number is the worst case), not the largest finite grid point beside it
+    def F(w):
+        return 1.0 / (1.0 + 1j * w * 5.0)
+
+    p = tc.performance(F, tc.FCRD_PERFORMANCE, (1e-3, 5.0), F_sd=lambda w: 50.0 * np.ones_like(w))
+    assert p.ratio_upper == float("inf")
+    assert np.isfinite(p.ratio)
+    # a small sd leaves the bound finite and above the point ratio
+    q = tc.performance(F, tc.FCRD_PERFORMANCE, (1e-3, 5.0), F_sd=lambda w: 1e-3 * np.ones_like(w))
+    assert np.isfinite(q.ratio_upper) and q.ratio_upper >= q.ratio

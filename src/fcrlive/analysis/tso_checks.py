@@ -469,7 +469,8 @@ def performance(
     r_grid = _ratio_fun(Fv, Gv, Dv, None, 1.0, margin, z)
     neg, wm = refined_min_grid(neg_ratio, w, np.where(np.isfinite(r_grid), -r_grid, np.nan))
     ratio = -neg
-    if np.isnan(ratio) and np.isinf(r_grid).any():
+    if np.isinf(r_grid).any():
+        # |1 + F G| reaches 0 on the grid: the ratio is unbounded there, not the largest finite point
         ratio, wm = float("inf"), float(w[np.argmax(r_grid)])
 
     def worst(k, sd=None, zz=z):
@@ -480,10 +481,11 @@ def performance(
     k_red = 1.0 if ratio < 1.0 else _k_red(lambda k: worst(k) if k < 1.0 else max(worst(1.0), ratio))
     ratio_up = k_lo = ratio_lo = k_hi = None
     if sdv is not None:
-        neg_u, _ = refined_min_grid(
-            lambda x: neg_ratio(x, sd=True), w, -_ratio_fun(Fv, Gv, Dv, sdv, 1.0, margin, z)
-        )
-        ratio_up = -neg_u
+        r_up_grid = _ratio_fun(Fv, Gv, Dv, sdv, 1.0, margin, z)
+        neg_u, _ = refined_min_grid(lambda x: neg_ratio(x, sd=True), w, -r_up_grid)
+        # the bound's denominator |1 + F G| − z·sd·|G| clipped to 0 on the grid: unbounded, not the largest
+        # finite neighbour (zoo plant G gave 1508 or 841 by the search's path)
+        ratio_up = float("inf") if np.isinf(r_up_grid).any() else -neg_u
         # an unknown sd (NaN) leaves the bound unknown; the bisection would read it as K = 0
         k_lo = float("nan") if np.isnan(ratio_up) else _k_red(
             lambda k: worst(k, sdv) if k < 1.0 else max(worst(1.0, sdv), ratio_up))
