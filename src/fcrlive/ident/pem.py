@@ -261,6 +261,7 @@ def _jacobian(st: _Struct, segs, aux) -> np.ndarray:
             for k in range(1, st.nd + 1):
                 _shifted(J[r:r + L, st.d_sl.start + k - 1], h, k, 1.0)
         if ip is not None:
+            ip.kaufman(st, F, C, D, e, J[r:r + L])
             ip.project(J[r:r + L])
         r += L
     return J
@@ -292,8 +293,60 @@ class _IcProjection:
 
     def __init__(self, st: _Struct, F, C, D, L: int):
         Phi = self.basis(st, F, C, D, L)
-        U, sv, _ = np.linalg.svd(Phi, full_matrices=False)
-        self.Q = U[:, sv > sv[0] * 1e-10]
+        U, sv, Vt = np.linalg.svd(Phi, full_matrices=False)
+        keep = sv > sv[0] * 1e-10
+        self.Q = U[:, keep]
+        # Φ⁺ = V S⁻¹ Uᵀ on the kept directions: the free-response coefficients ĉ = Φ⁺ e (Kaufman's term)
+        self._pinv_v = Vt[keep].T / sv[keep]
+
+    def kaufman(self, st: _Struct, F, C, D, e: np.ndarray, J: np.ndarray) -> None:
+        """J ← J − ∂(Φ ĉ)/∂θ at fixed ĉ = Φ⁺ e, in place, before the projection: with it Jᵀε is the
+        exact gradient of ‖P⊥ e‖² (Kaufman's variable-projection Jacobian).
+
+        Φ ĉ = Σ_i (D/(C F_i)) p_i + (1/C) p_c + const, p the pulse trains with the coefficients ĉ, so
+        ∂/∂f_{i,k} = −q⁻ᵏ (1/F_i) s_i with s_i = (D/(C F_i)) p_i; ∂/∂c_k = −q⁻ᵏ (1/C) (Σ s_i + s_c);
+        ∂/∂d_k = q⁻ᵏ (1/(C F_i)) p_i summed over i. Without it the search stalled in "no descent" short
+        of the minimum at a point that depended on the rounding of the arithmetic (BLAS kernel)."""
+        L = e.shape[0]
+        coef = self._pinv_v @ (self.Q.T @ e)
+        noise = st.nc > 0 or st.nd > 0
+        pos = 1
+        s_all = np.zeros(L)
+        g_all = np.zeros(L)
+
+        def add(col: np.ndarray, x: np.ndarray, lag: int, sign: float) -> None:
+            if lag < L:
+                col[lag:] += sign * x[:L - lag]
+
+        for i in range(st.nu):
+            m = min(max(st.nf[i], st.nk[i] + st.nb[i] - 1), L)
+            if m == 0:
+                continue
+            p = np.zeros(L)
+            p[:m] = coef[pos:pos + m]
+            pos += m
+            g = _filt(_ONE, F[i], p)
+            s_i = _filt(D, C, g) if noise else g
+            s_all += s_i
+            g_all += g
+            if st.nf[i]:
+                z = _filt(_ONE, F[i], s_i)
+                f0 = st.f_sl(i).start
+                for k in range(1, st.nf[i] + 1):
+                    add(J[:, f0 + k - 1], z, k, 1.0)
+        mc = min(max(st.nc, st.nd), L)
+        if mc:
+            p = np.zeros(L)
+            p[:mc] = coef[pos:pos + mc]
+            s_all += _filt(_ONE, C, p)
+        if st.nc:
+            h = _filt(_ONE, C, s_all)
+            for k in range(1, st.nc + 1):
+                add(J[:, st.c_sl.start + k - 1], h, k, 1.0)
+        if st.nd:
+            h = _filt(_ONE, C, g_all)
+            for k in range(1, st.nd + 1):
+                add(J[:, st.d_sl.start + k - 1], h, k, -1.0)
 
     @staticmethod
     def basis(st: _Struct, F, C, D, L: int) -> np.ndarray:
@@ -393,6 +446,15 @@ SAME_LOSS = 1e-2
 multistart keeps the earlier start (a deterministic tie-break instead of a rounding coin toss)."""
 
 
+def _predicted(J: np.ndarray, eps: np.ndarray) -> float:
+    """Loss decrease a full Gauss-Newton step predicts at the point of (J, eps); inf if it cannot."""
+    try:
+        delta = _gn_step(J, eps)
+    except (np.linalg.LinAlgError, ValueError):
+        return np.inf
+    return float(np.sum((J @ delta) ** 2)) if np.all(np.isfinite(delta)) else np.inf
+
+
 def _final_verdict(st: _Struct, th: np.ndarray, eps: np.ndarray, aux, segs, V: float,
                    J: np.ndarray | None = None) -> tuple[bool, np.ndarray | None]:
     """Converged to statistical accuracy (:data:`STAT_TOL`): the Gauss-Newton predicted decrease at θ.
@@ -475,11 +537,15 @@ def _search_iter(st: _Struct, th0: np.ndarray, segs, maxiter: int, tol: float) -
             rel = (V - V2) / V
             th = cand
             eps, V, aux = e2, V2, aux2
-            if rel <= tol and mu * np.linalg.norm(delta) <= 1e-8 * (1 + np.linalg.norm(th)):
-                converged, reason = True, "relative loss decrease and step below tolerance"
-                J = None  # not evaluated at the new θ
-                break
             J = _jacobian(st, segs, aux)
+            if rel <= tol and mu * np.linalg.norm(delta) <= 1e-8 * (1 + np.linalg.norm(th)):
+                if _predicted(J, eps) <= STAT_TOL * V / eps.shape[0]:
+                    converged, reason = True, "relative loss decrease and step below tolerance"
+                    break
+                # a short step in a curved valley, not a minimum: where it stopped here depended on
+                # the rounding of the step halving (BLAS kernel); Levenberg-Marquardt walks the valley
+                use_lm = True
+                algorithm = "gn+lm"
         else:
             th, V, k, converged, reason, eps, aux, J = _lm(st, th, eps, aux, J, V, segs, maxiter - it + 1,
                                                            tol)
@@ -512,10 +578,10 @@ def _lm(st, th, eps, aux, J, V, segs, maxiter, tol):
         if ok:
             rel = (V - V2) / V
             th, V, eps, aux = cand, V2, e2, aux2
-            if rel <= tol:
-                return (th, V, k, True, "Levenberg-Marquardt: relative loss decrease below tolerance", eps,
-                        aux, None)
             J = _jacobian(st, segs, aux)
+            if rel <= tol and _predicted(J, eps) <= STAT_TOL * V / eps.shape[0]:
+                return (th, V, k, True, "Levenberg-Marquardt: relative loss decrease below tolerance", eps,
+                        aux, J)
             H = J.T @ J
             g = J.T @ eps
             dg = np.diag(H).copy()
