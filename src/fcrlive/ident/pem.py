@@ -876,7 +876,12 @@ def _from_init(st: _Struct, init: PolyModel) -> np.ndarray:
     return st.pack(B, F, C, D)
 
 
-def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, multistart: bool | str,
+N_PERTURBED = 3
+"""Restarts near the best end point so far (:func:`_perturbed`) when the multistart runs; an integer
+``multistart`` runs every start with that many of them."""
+
+
+def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, multistart: bool | str | int,
          n_high: int | None, maxiter: int, tol: float, seed: int, covariance: str = "gauss") -> PolyModel:
     if covariance not in ("gauss", "sandwich"):
         raise ValueError(f"covariance = {covariance!r}: use 'gauss' or 'sandwich'")
@@ -969,10 +974,12 @@ def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, mult
         # seeds 0-19 (15 min) and Z_ur's as they were, and held seed 0 under either arithmetic.
         lazy.remove(shorter)
         run(shorter())
-    if multistart is True or (multistart == "auto" and stalled(best)):
+    every = multistart is True or (isinstance(multistart, int) and not isinstance(multistart, bool))
+    if every or (multistart == "auto" and stalled(best)):
         rng = np.random.default_rng(seed)
+        n_pert = N_PERTURBED if isinstance(multistart, (bool, str)) else int(multistart)
         extra = [lambda: _real_roots(st, best.theta), *lazy,
-                 *(lambda: _perturbed(st, best.theta, rng) for _ in range(3))]
+                 *(lambda: _perturbed(st, best.theta, rng) for _ in range(n_pert))]
         for make in extra:
             run(make())
             if multistart == "auto" and not stalled(best) and len(results) >= 2:
@@ -1066,7 +1073,7 @@ def _sandwich(J: np.ndarray, eps: np.ndarray, bounds) -> np.ndarray:
 
 
 def bj(data: IdData, nb: int | Sequence[int], nc: int, nd: int, nf: int | Sequence[int],
-       nk: int | Sequence[int] = 1, *, init: PolyModel | None = None, multistart: bool | str = "auto",
+       nk: int | Sequence[int] = 1, *, init: PolyModel | None = None, multistart: bool | str | int = "auto",
        n_high: int | None = None, maxiter: int = 100, tol: float = 1e-10, seed: int = 0,
        ic: str = "zero", covariance: str = "gauss") -> PolyModel:
     """Box-Jenkins model y = Σ B_i/F_i u_i + C/D e by prediction-error minimisation.
@@ -1078,7 +1085,7 @@ def bj(data: IdData, nb: int | Sequence[int], nc: int, nd: int, nf: int | Sequen
         init: initial model (same orders, A = 1); roots outside the unit circle are reflected inside.
         multistart: "auto" (restart when the first search stalls; BJ also always tries the start
             from a shorter ARX when the high-order one has more than 8 poles), True (always try every
-            start), False (one start).
+            start), an int n (every start, with n perturbed restarts instead of 3), False (one start).
         n_high: order of the high-order ARX used for initial values (default from N, at most 30).
         maxiter, tol: iteration limit and relative loss tolerance of the search.
         seed: seed of the perturbed restarts (the result is deterministic for a given seed).
@@ -1098,7 +1105,7 @@ def bj(data: IdData, nb: int | Sequence[int], nc: int, nd: int, nf: int | Sequen
 
 
 def oe(data: IdData, nb: int | Sequence[int], nf: int | Sequence[int], nk: int | Sequence[int] = 1, *,
-       init: PolyModel | None = None, multistart: bool | str = "auto", n_high: int | None = None,
+       init: PolyModel | None = None, multistart: bool | str | int = "auto", n_high: int | None = None,
        maxiter: int = 100, tol: float = 1e-10, seed: int = 0, ic: str = "zero",
        covariance: str = "gauss") -> PolyModel:
     """Output-error model y = Σ B_i/F_i u_i + e (a BJ model with C = D = 1). Arguments as :func:`bj`.
