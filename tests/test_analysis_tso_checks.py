@@ -251,3 +251,25 @@ def test_decision_of_an_exact_f_is_the_point_verdict():
     assert not v.passed and v.decision == "fail" and v.stability_margin_band_upper is None
     v = tc.assess_tso(_delayed_lag(3.0, 1.0), products=("fcrd",))["fcrd"]
     assert v.closed_loop_stable is False and v.decision == "fail"
+
+
+@pytest.mark.parametrize("plant", ["paper-plant1", "G-classic-fwd-40Hz-poor"])
+def test_margin_and_ratio_refinement_agree_with_brent(plant):
+    """The nested-grid refinement (gridsearch.refined_min_grid) finds the minima Brent's search finds."""
+    from fcrlive.gridsearch import log_grid, refined_min
+    from fcrlive.plant import transfer as tr
+    from fcrlive.plant.params import preset
+    from fcrlive.sim import zoo
+
+    pl = preset(plant) if plant.startswith("paper") else zoo.plants()[plant].plant
+    F = tc.as_response(tr.analytic(pl).F)
+    g_stab, g_perf = tc.PRODUCTS["fcrn"]
+    for rng in (tc.band_omega(), (1e-4, 10.0)):
+        m = tc.stability_margin(F, g_stab, rng)
+        ref, w_ref = refined_min(lambda x: np.abs(1.0 + F(x) * g_stab(x)), log_grid(*rng, 2000))
+        assert m.margin == pytest.approx(ref, rel=1e-10) and m.omega == pytest.approx(w_ref, rel=1e-6)
+    p = tc.performance(F, g_perf, (1e-4, 10.0))
+    neg, w_ref = refined_min(
+        lambda x: -tc._ratio_fun(F(x), g_perf(x), tc.disturbance_profile(x), None, 1.0, tc.PERFORMANCE_MARGIN,
+                                 0.0), log_grid(1e-4, 10.0, 3000))
+    assert p.ratio == pytest.approx(-neg, rel=1e-10) and p.omega == pytest.approx(w_ref, rel=1e-6)

@@ -31,7 +31,7 @@ import numpy as np
 
 from fcrlive.constants import F0_HZ, Z95
 from fcrlive.errors import ConfigError
-from fcrlive.gridsearch import log_grid, refined_min
+from fcrlive.gridsearch import log_grid, refined_min_grid
 
 ResponseFunction = Callable[[np.ndarray], np.ndarray]
 """A response as a function: ``fr(omega [rad/s]) -> complex ndarray`` of the same shape (module docstring)."""
@@ -367,7 +367,7 @@ def stability_margin(
     def dist(x):
         return np.abs(1.0 + evaluate(Ff, x) * evaluate(Gf, x))
 
-    m, wm = refined_min(dist, w, dist(w))
+    m, wm = refined_min_grid(dist, w, dist(w))
     lower = upper = None
     if F_sd is not None:
         sdf = as_response(F_sd)
@@ -375,8 +375,8 @@ def stability_margin(
         def dist_lo(x, sign=-1.0):
             return dist(x) + sign * z * np.abs(evaluate(sdf, x)) * np.abs(evaluate(Gf, x))
 
-        lower, _ = refined_min(dist_lo, w, dist_lo(w))
-        upper, _ = refined_min(lambda x: dist_lo(x, 1.0), w, dist_lo(w, 1.0))
+        lower, _ = refined_min_grid(dist_lo, w, dist_lo(w))
+        upper, _ = refined_min_grid(lambda x: dist_lo(x, 1.0), w, dist_lo(w, 1.0))
     return StabilityMargin(m, wm, lower, upper)
 
 
@@ -467,7 +467,7 @@ def performance(
         return np.where(np.isfinite(r), -r, np.nan)
 
     r_grid = _ratio_fun(Fv, Gv, Dv, None, 1.0, margin, z)
-    neg, wm = refined_min(neg_ratio, w, np.where(np.isfinite(r_grid), -r_grid, np.nan))
+    neg, wm = refined_min_grid(neg_ratio, w, np.where(np.isfinite(r_grid), -r_grid, np.nan))
     ratio = -neg
     if np.isnan(ratio) and np.isinf(r_grid).any():
         ratio, wm = float("inf"), float(w[np.argmax(r_grid)])
@@ -480,7 +480,7 @@ def performance(
     k_red = 1.0 if ratio < 1.0 else _k_red(lambda k: worst(k) if k < 1.0 else max(worst(1.0), ratio))
     ratio_up = k_lo = ratio_lo = k_hi = None
     if sdv is not None:
-        neg_u, _ = refined_min(
+        neg_u, _ = refined_min_grid(
             lambda x: neg_ratio(x, sd=True), w, -_ratio_fun(Fv, Gv, Dv, sdv, 1.0, margin, z)
         )
         ratio_up = -neg_u
@@ -488,7 +488,7 @@ def performance(
         k_lo = float("nan") if np.isnan(ratio_up) else _k_red(
             lambda k: worst(k, sdv) if k < 1.0 else max(worst(1.0, sdv), ratio_up))
         # the optimistic side: F moved by z·sd away from −1/G (z → −z in the ratio's denominator)
-        neg_l, _ = refined_min(
+        neg_l, _ = refined_min_grid(
             lambda x: neg_ratio(x, sd=True, zz=-z), w, -_ratio_fun(Fv, Gv, Dv, sdv, 1.0, margin, -z)
         )
         ratio_lo = -neg_l

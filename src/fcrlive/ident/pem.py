@@ -29,6 +29,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.fft as _sfft
 import scipy.linalg as sla
 import scipy.signal as sps
 import scipy.stats as stats
@@ -284,20 +285,53 @@ class _IcProjection:
     governor loops (time constants of minutes) the free response from a not-at-rest start otherwise
     dominates the simulation error of OE/BJ and pulls the fit into wrong minima.
 
-    J ← P⊥ J treats Φ as fixed, so Jᵀε is not the exact gradient of the loss (1.5-5 % off on test
-    data) and a search often ends in "no descent" at a minimum rather than converged, which starts the
-    restarts. Kaufman's term −P⊥ (∂Φ/∂θ) ĉ makes it exact (checked against finite differences), but
-    then fewer restarts ran and Z_u missed the droop by more than 0.5 pp on 6 of 20 15-min records
-    instead of 1 (paper-plant1, 12 dB), and its intervals changed: not used.
+    J ← P⊥ J alone treats Φ as fixed: Jᵀε was 1.5-5 % off the gradient, searches ended in "no descent"
+    short of the minimum, and where they ended moved with the rounding of the arithmetic (the same log
+    gave Z_u droop 0.0754 or 0.0792 by BLAS kernel). :meth:`kaufman` adds Kaufman's term −P⊥ (∂Φ/∂θ) ĉ,
+    which makes the gradient exact (1e-10 against finite differences). The restarts that the stalls used
+    to trigger by accident are asked for where they are needed (Z_u: experiments.ZU_MULTISTART).
     """
+
+    RTOL = 1e-10
+    """Singular values of Φ below RTOL × the largest count as zero (the basis is then rank-deficient)."""
 
     def __init__(self, st: _Struct, F, C, D, L: int):
         Phi = self.basis(st, F, C, D, L)
+        self.Q, self._coef = self.orthonormal(Phi, coefficients=True)
+
+    @classmethod
+    def orthonormal(cls, Phi: np.ndarray, coefficients: bool = False):
+        """An orthonormal basis of Φ's numerical column space (rank by :data:`RTOL`).
+
+        Householder QR (LAPACK geqrf/orgqr directly: their wrapper costs more than these small
+        factorisations) is half the time of the SVD that was here, and spans the same space when Φ has
+        full rank, which a cheap bound checks first: σ_max/σ_min(R) ≤ ‖R‖_F ‖R⁻¹‖_F. Only when the bound
+        fails are R's singular values computed (the same as Φ's); a basis rank-deficient by RTOL takes
+        the SVD of Φ as before (its left singular vectors of the kept values). With ``coefficients``
+        also M with Φ⁺ = M Qᵀ (R⁻¹, or V S⁻¹ of the kept values): the free-response coefficients of
+        Kaufman's term (:meth:`kaufman`).
+        """
+        n = Phi.shape[1]
+        if n <= Phi.shape[0]:
+            qr, tau, _, info = _geqrf(Phi, overwrite_a=0)
+            if info == 0:
+                R = np.triu(qr[:n])
+                Ri = _full_rank_inverse(R, cls.RTOL)
+                ok = Ri is not None
+                if not ok:
+                    sv = np.linalg.svd(R, compute_uv=False)
+                    ok = bool(sv[-1] > sv[0] * cls.RTOL)
+                if ok:
+                    Q, _, info = _orgqr(qr, tau, overwrite_a=1)
+                    if info == 0:
+                        if not coefficients:
+                            return Q
+                        if Ri is None:
+                            Ri = sla.solve_triangular(R, np.eye(n))
+                        return Q, Ri
         U, sv, Vt = np.linalg.svd(Phi, full_matrices=False)
-        keep = sv > sv[0] * 1e-10
-        self.Q = U[:, keep]
-        # Φ⁺ = V S⁻¹ Uᵀ on the kept directions: the free-response coefficients ĉ = Φ⁺ e (Kaufman's term)
-        self._pinv_v = Vt[keep].T / sv[keep]
+        keep = sv > sv[0] * cls.RTOL
+        return (U[:, keep], Vt[keep].T / sv[keep]) if coefficients else U[:, keep]
 
     def kaufman(self, st: _Struct, F, C, D, e: np.ndarray, J: np.ndarray) -> None:
         """J ← J − ∂(Φ ĉ)/∂θ at fixed ĉ = Φ⁺ e, in place, before the projection: with it Jᵀε is the
@@ -308,7 +342,7 @@ class _IcProjection:
         ∂/∂d_k = q⁻ᵏ (1/(C F_i)) p_i summed over i. Without it the search stalled in "no descent" short
         of the minimum at a point that depended on the rounding of the arithmetic (BLAS kernel)."""
         L = e.shape[0]
-        coef = self._pinv_v @ (self.Q.T @ e)
+        coef = self._coef @ (self.Q.T @ e)
         noise = st.nc > 0 or st.nd > 0
         pos = 1
         s_all = np.zeros(L)
@@ -367,8 +401,8 @@ class _IcProjection:
         mc = min(max(st.nc, st.nd), L)
         if mc:
             resp.append((_filt(_ONE, C, _unit_impulse(L)), mc))
-        # Fortran order: the columns are written one by one and the SVD takes its input column-major (a
-        # C-order matrix costs it a transposing copy, a third of its time); the values are the same
+        # Fortran order: the columns are written one by one and the QR/SVD take their input column-major
+        # (a C-order matrix costs them a transposing copy); the values are the same
         Phi = np.empty((L, 1 + sum(m for _, m in resp)), order="F")
         Phi[:, 0] = 1.0
         c = 1
@@ -387,6 +421,7 @@ class _IcProjection:
 
 
 _potrf, _potrs = sla.lapack.dpotrf, sla.lapack.dpotrs
+_geqrf, _orgqr, _trtri = sla.lapack.dgeqrf, sla.lapack.dorgqr, sla.lapack.dtrtri
 
 
 def _ls(X: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -1050,24 +1085,70 @@ def _hac_lag(eps: np.ndarray, bounds) -> int:
     return kmax
 
 
+def _full_rank_inverse(R: np.ndarray, rtol: float) -> np.ndarray | None:
+    """R⁻¹ of an upper-triangular R when a cheap bound proves every singular value above rtol × the
+    largest, else None (the caller then looks at the singular values): σ_max/σ_min ≤ ‖R‖_F ‖R⁻¹‖_F."""
+    Ri, info = _trtri(R, lower=0)
+    if info != 0 or not np.all(np.isfinite(Ri)):
+        return None
+    return Ri if math.sqrt(np.vdot(R, R) * np.vdot(Ri, Ri)) * rtol < 1.0 else None
+
+
+def _hac_sum(h: np.ndarray, bounds, M: int) -> np.ndarray:
+    """Σ_{|τ|≤M} w_τ Σ_n h[n] h[n−τ]ᵀ within each experiment, Bartlett weights w_τ = 1 − |τ|/(M + 1).
+
+    By FFT: the weighted lag sum is Σ_k Ŵ_k H_kᴴ H_k / n over the frequencies of an n-point DFT H of h
+    (n ≥ L + M + 1: no lag folds onto another), Ŵ the DFT of the weights (the Fejér kernel, ≥ 0). It is
+    a sum of PSD terms, so it is PSD and suffers no cancellation, where the direct lag sum (M + 1 products
+    h[τ:]ᵀ h[:−τ], M up to N/8) took ~M times longer and lost digits. The whole triangle of weights even
+    when an experiment is shorter than M (n ≥ 2M + 1): cut at L − 1 lags its DFT would not be ≥ 0.
+    """
+    r = h.shape[1]
+    Om = np.zeros((r, r))
+    for a, b in bounds:
+        L = b - a
+        n = _sfft.next_fast_len(max(L, M) + M + 1, real=True)
+        w = np.zeros(n)
+        w[:M + 1] = 1.0 - np.arange(M + 1) / (M + 1.0)
+        w[n - M:] = w[M:0:-1]
+        c = np.maximum(_sfft.rfft(w).real, 0.0) / n  # clips rounding only
+        c[1:(n + 1) // 2] *= 2.0  # each of these rfft bins stands for itself and its conjugate
+        H = _sfft.rfft(h[a:b], n, axis=0)
+        sc = np.sqrt(c)[:, None]
+        Hs = np.concatenate((H.real * sc, H.imag * sc))
+        Om += Hs.T @ Hs
+    return Om
+
+
 def _sandwich(J: np.ndarray, eps: np.ndarray, bounds) -> np.ndarray:
     """Heteroscedasticity- and autocorrelation-consistent covariance of a prediction-error estimate.
 
     P = H⁻¹ Ω H⁻¹, H = JᵀJ, Ω = Σ_{|τ|≤M} w_τ Σ_n g[n] g[n−τ]ᵀ, g[n] = J[n] ε[n] (within experiments),
     Bartlett weights w_τ = 1 − |τ|/(M + 1), M from the residual correlation (:func:`_hac_lag`).
+
+    Computed as P = L (Lᵀ Ω L) Lᵀ with (JᵀJ)⁺ = L Lᵀ (:func:`_cov_factor`), and Lᵀ Ω L as the lag sum
+    (:func:`_hac_sum`) of the scores of J L = Q U (Q from the QR of the column-scaled J, U from the SVD
+    of its R; U = I when a cheap bound shows full rank): orthonormal columns, so nothing is amplified by
+    the condition number of J, as Lᵀ Ω L from Ω was (on Z_cu fits at cond 1e6-4e6, P's diagonal was off
+    by 1e-4 to 9e-2 relative vs an extended-precision reference; now ≤ 3e-10).
     """
     M = _hac_lag(eps, bounds)
-    g = J * eps[:, None]
-    Om = g.T @ g
-    for a, b in bounds:
-        gs = g[a:b]
-        for tau in range(1, min(M, b - a - 1) + 1):
-            G = gs[tau:].T @ gs[:-tau]
-            Om += (1.0 - tau / (M + 1.0)) * (G + G.T)
-    # P = L (Lᵀ Ω L) Lᵀ with the middle made PSD: Ω is PSD in exact arithmetic (Bartlett weights)
-    L = _cov_factor(J)
-    M_ = L.T @ Om @ L
-    w, U = np.linalg.eigh(0.5 * (M_ + M_.T))
+    scale = np.sqrt(np.einsum("ij,ij->j", J, J))
+    scale[scale == 0] = 1.0
+    # economic QR (more samples than parameters: _pem checks it), by LAPACK as in _IcProjection
+    qr, tau, _, _ = _geqrf(J / scale, overwrite_a=1)
+    R = np.triu(qr[:J.shape[1]])
+    Z, _, _ = _orgqr(qr, tau, overwrite_a=1)
+    Ri = _full_rank_inverse(R, RANK_RTOL)
+    if Ri is not None:
+        L = Ri / scale[:, None]
+    else:  # as _cov_factor: the pseudo-inverse on the identifiable subspace
+        U_, sv, Vt = np.linalg.svd(R)
+        keep = sv > RANK_RTOL * sv[0] if sv.size else sv.astype(bool)
+        L = (Vt[keep].T / sv[keep]) / scale[:, None]
+        Z = Z @ U_[:, keep]
+    M_ = _hac_sum(Z * eps[:, None], bounds, M)
+    w, U = np.linalg.eigh(M_)
     K = L @ (U * np.sqrt(np.maximum(w, 0.0)))
     return K @ K.T
 
