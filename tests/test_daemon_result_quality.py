@@ -46,7 +46,7 @@ they miss by: its max|S| interval is now 0.26× the value, above the rule's 0.25
 ZCU_WILD = (10, True, 3)
 """Was a wild outlier of the kind the demo showed (no droop, max|S| 5.3 in [0, 14.8]) until Z_cu took G_J
 from the data sheet's H and restarted from physical denominators (issue 12); now a good window."""
-ZU_WIDE = (10, False, 5)
+ZU_WIDE = (10, False, 14)
 """Z_u: a droop with a uselessly wide interval."""
 ZU_FAIR = (10, False, 4)
 """Z_u: a good droop with a wide max|G_1|."""
@@ -98,7 +98,7 @@ def test_rejected_short_window_keeps_the_headline_topics(zcu_good):
 
 def test_short_zu_window_with_a_useless_droop_interval_is_rejected():
     # the identification withholds a droop whose interval is wider than itself (analysis.quality: here
-    # 6 % in [0, 22] %): null with the reason, and the rule rejects a run without a droop, saying why
+    # 3.0 % in [0, 28] %): null with the reason, and the rule rejects a run without a droop, saying why
     rep = _report(*ZU_WIDE)
     r = rep.to_json_dict()
     assert r["method"] == "zu" and r["droop"]["value"] is None and r["droop"]["ci95"] == [None, None]
@@ -276,13 +276,13 @@ class _Recorder:
 
 
 async def test_worker_path_stores_and_publishes_a_rejected_short_window(tmp_path):
-    """10 simulated minutes without excitation (Z_u, seed 5) in the store, identified by the default
+    """10 simulated minutes without excitation (Z_u, ZU_WIDE) in the store, identified by the default
     plug-in in the worker process: stored with its verdict, headline topics not published."""
     from fcrlive.daemon.sample import Quality, Sample
     from fcrlive.daemon.service import Service
     from fcrlive.daemon.worker import IdentificationWorker
 
-    res = simulate(PLANT, SimConfig(duration_s=600, snr_db=12.0, excitation=False, seed=5))
+    res = simulate(PLANT, SimConfig(duration_s=600, snr_db=12.0, excitation=False, seed=ZU_WIDE[2]))
     t0 = time.time() - 620
     db = tmp_path / "s.sqlite"
 
@@ -323,7 +323,7 @@ async def test_worker_path_stores_and_publishes_a_rejected_short_window(tmp_path
     assert strict.metrics.last_result_time._value.get() == 0  # no accepted result yet
 
     # a rule that would tolerate a wider interval cannot bring the droop back: the identification itself
-    # withheld it (analysis.quality: 6 % in [0, 22] %), so the run is rejected under either rule, saying why
+    # withheld it (analysis.quality: 3.0 % in [0, 28] %), so the run is rejected under either rule, saying why
     assert out.result.droop.value is None and "wider than the value" in out.result.droop.reason
     assert out2.result_quality.level == "rejected"
     assert out2.result_quality.reasons == out.result_quality.reasons

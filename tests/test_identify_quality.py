@@ -172,9 +172,11 @@ def test_a_model_without_covariance_reports_null_with_reason():
 
 @functools.cache
 def _short_quiet_log():
-    """10 min of normal operation at 12 dB, seed 5: too little movement for Z_u's droop (its interval
-    came out 6 % in [0, 22] %, 3.7x the value: far from the 1x limit, so no rounding decides it)."""
-    res = simulate(PLANT, SimConfig(duration_s=600, snr_db=12.0, excitation=False, seed=5))
+    """10 min of normal operation at 12 dB, seed 14: too little movement for Z_u's droop (its interval
+    came out 3.0 % in [0, 28] %, 9.4x the value, and so under 1e-13 perturbations of the data: far from
+    the 1x limit). Seed 5, used before, gave 3.7x until the search's gradient was made exact, then 0.2x
+    around 8.0 %; seed 7 gave 0.01x or 5.7x by the rounding of the data (Z_u's basins: docs/identify.md)."""
+    res = simulate(PLANT, SimConfig(duration_s=600, snr_db=12.0, excitation=False, seed=14))
     return plant_signals(log_from_sim(res), rated_mw=300.0)
 
 

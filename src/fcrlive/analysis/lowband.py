@@ -85,6 +85,8 @@ PEAK_MIN_COHERENCE = 0.6
 """u-ε coherence (1-s data, Welch) at the peak frequency below which max|G_1| and max|S| are not
 reported (meter noise or process noise dominate there; estimation-notes: coherence 0.01-0.3 at the peaks
 on real logs, and no estimator recovered them)."""
+PEAK_BRACKET = 1.5
+"""The coherence must reach :data:`PEAK_MIN_COHERENCE` at the maximum and at this multiple of its ω."""
 MIN_DURATION_S = 600.0
 """Shortest usable record [s]."""
 BANDS = ((0.002, 0.02), (0.02, 0.06), (0.06, 0.15), (0.15, 0.4))
