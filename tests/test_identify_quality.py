@@ -194,3 +194,49 @@ def test_short_low_snr_log_gives_a_null_droop_with_its_reason():
     assert r.max_abs_s is None and r.tso is None  # Z_u cannot give them: not withheld, just absent
     line = next(x for x in text_summary(r).splitlines() if x.startswith("effective droop"))
     assert r.droop.reason in line and "not identifiable: not identifiable" not in line
+
+
+# -- Z_ur's search stopped short: what one exact Newton step moves ------------------------------------
+
+def test_search_short_withholds_only_what_the_newton_step_moves():
+    rep = _report(method="zur")
+    sd_s = 0.05 / 1.959963984540054  # max|S| 1.3 [1.25, 1.35]: sd 0.0255
+    stepped = _report(
+        method="zur",
+        droop=ValueCI(value=0.08 + 0.0001, ci95=(0.079, 0.081)),  # 0.2 sd: kept
+        max_abs_s=PeakCI(value=1.3 + 0.6 * sd_s, omega=0.3, ci95=(1.25, 1.35)),  # 0.6 sd: withheld
+    )
+    stop = "Levenberg-Marquardt: maximum number of iterations (83) reached"
+    ni, note = quality.search_short(rep, stepped, stop)
+    assert set(ni) == {"max_abs_s"}
+    assert ni["max_abs_s"].startswith("Z_ur search stopped short of the minimum (Levenberg-Marquardt")
+    assert "moves max|S| from 1.3 to 1.32, 0.6 standard errors (more than 0.5)" in ni["max_abs_s"]
+    assert note is not None and "less than 0.5 standard errors" in note
+    out = quality.withhold(rep, ni)
+    assert out.max_abs_s.value is None and out.max_abs_s.reason == ni["max_abs_s"]
+    assert out.droop.value == 0.08 and out.max_abs_g1.value == 1.0
+    assert out.local is None  # eq. 9-10 and the margins come from the same S
+
+
+def test_search_short_uses_the_side_of_the_interval_the_step_goes_to():
+    # the droop's interval [7.0, 8.1] %: a step down by 0.1 pp is 0.18 sd of the lower side, kept; up by
+    # 0.1 pp is 1.96 sd of the upper side, withheld
+    rep = _report(method="zur", droop=ValueCI(value=0.08, ci95=(0.070, 0.081)))
+    down = _report(method="zur", droop=ValueCI(value=0.079, ci95=(0.070, 0.081)))
+    up = _report(method="zur", droop=ValueCI(value=0.081, ci95=(0.070, 0.081)))
+    assert "droop" not in quality.search_short(rep, down, "x")[0]
+    assert "droop" in quality.search_short(rep, up, "x")[0]
+    # a quantity the step lost (null after it) cannot be judged: withheld
+    gone = _report(method="zur", max_abs_g1=PeakCI(value=None, omega=None, ci95=(None, None)))
+    assert "max_abs_g1" in quality.search_short(rep, gone, "x")[0]
+
+
+def test_zur_process_noise_gates_s_by_the_excitation_coherence():
+    low = lambda w: np.full(np.shape(w), 0.45)  # noqa: E731
+    high = lambda w: np.full(np.shape(w), 0.75)  # noqa: E731
+    ni = quality.zur_process_noise(0.6, low)
+    assert set(ni) == {"max_abs_s", "gp", "tso"}
+    assert "paper Remark 7" in ni["max_abs_s"] and "0.45" in ni["max_abs_s"]
+    assert "0.3-0.6 rad/s" in ni["max_abs_s"]
+    assert quality.zur_process_noise(0.6, high) == {}
+    assert quality.zur_process_noise(None, low) == {}

@@ -63,6 +63,7 @@ import scipy.signal as sps
 from fcrlive.analysis import controller as ctl_mod
 from fcrlive.errors import DataError
 from fcrlive.ident import FreqResp, IdData, IdentError, ResidResult, bj, oe, resid, xresid
+from fcrlive.ident.pem import newton_step
 from fcrlive.ident.poly import PolyModel
 from fcrlive.signals import PlantSignals, excitation_detected
 
@@ -258,6 +259,14 @@ class ExperimentResult:
     validation: dict[str, ResidResult] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
+    newton: Responses | None = None
+    """Z_ur whose search stopped short of the minimum: the responses after one exact Newton step from the
+    fit (:func:`fcrlive.ident.pem.newton_step`); how far each quantity moves with it, in its standard
+    errors, decides whether it is shown (:func:`fcrlive.analysis.quality.search_short`). None otherwise."""
+    coherence: Callable[[np.ndarray], np.ndarray] | None = None
+    """Z_ur: ω [rad/s] → the magnitude-squared coherence of r and ε in the log (Welch,
+    :func:`excitation_coherence`): the share of ε the excitation explains, which Remark 7's bias of S
+    follows (:func:`fcrlive.analysis.quality.zur_process_noise`). None for the other methods."""
 
     @property
     def omega_max(self) -> float:
@@ -709,12 +718,25 @@ def zur(
     nb, nc, nd, nf = orders
     m = _fit("ε ← (u, r)", bj, d, [nb, nb], nc, nd, [nf, nf], [0, 0], **FIT)
 
-    def responses(omega) -> dict[str, FreqResp]:
-        w = np.atleast_1d(np.asarray(omega, float))
-        G_1 = m.freqresp(w, "u") * prep.u_delay(w)
-        S = m.freqresp(w, "r")
-        return {"G_1": G_1, "S": S, "G_p": (1.0 - S) / G_1, "G_J": G_1 / S}
+    def responses_of(mod: PolyModel) -> Responses:
+        def responses(omega) -> dict[str, FreqResp]:
+            w = np.atleast_1d(np.asarray(omega, float))
+            G_1 = mod.freqresp(w, "u") * prep.u_delay(w)
+            S = mod.freqresp(w, "r")
+            return {"G_1": G_1, "S": S, "G_p": (1.0 - S) / G_1, "G_J": G_1 / S}
 
+        return responses
+
+    responses = responses_of(m)
+    newton = None
+    if not m.report.converged:
+        # The search's Jacobian is not the exact one with ic="estimate" (ident.pem._IcProjection): it
+        # stopped short on 8-10 of 10 30-min logs of the paper's plant. One exact step from its end point
+        # shows which quantities that matters for (analysis.quality.search_short).
+        try:
+            newton = responses_of(newton_step(m, d, ic=FIT["ic"]).model)
+        except (IdentError, ValueError, np.linalg.LinAlgError):
+            newton = None
     val, warns = _validate({"ε ← (u, r)": (m, d)})
     warns.append(
         "Z_ur is biased when process noise reaches the electric power (paper Remark 7): on the paper's "
@@ -723,8 +745,28 @@ def zur(
     )
     return ExperimentResult(
         "zur", prep.Ts, d.N, prep.duration_s, {"epsilon<-(u,r)": m}, responses, ("G_1", "S", "G_p"), None,
-        val, tuple(warns), (),
+        val, tuple(warns), (), newton, excitation_coherence(prep),
     )
+
+
+COHERENCE_NPERSEG = 512
+"""Welch segment length [samples] of :func:`excitation_coherence` (256 s at 0.5 s: 0.025 rad/s bins)."""
+
+
+def excitation_coherence(
+    prep: Prepared, x: str = "r", y: str = "epsilon"
+) -> Callable[[np.ndarray], np.ndarray]:
+    """ω → magnitude-squared coherence of ``x`` and ``y`` (Welch over the concatenated decimated segments,
+    Hann windows of :data:`COHERENCE_NPERSEG`), linearly interpolated between the bins."""
+    a, b = prep.signals[x], prep.signals[y]
+    nper = int(min(COHERENCE_NPERSEG, a.size))
+    f, c = sps.coherence(a, b, fs=1.0 / prep.Ts, nperseg=nper)
+    w_bins = 2.0 * np.pi * f
+
+    def coherence(omega) -> np.ndarray:
+        return np.interp(np.atleast_1d(np.asarray(omega, float)), w_bins, c)
+
+    return coherence
 
 
 ZU_TS_MIN = 1.0

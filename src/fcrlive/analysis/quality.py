@@ -27,7 +27,10 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
+import numpy as np
+
 from fcrlive.analysis.report import IdentifyReport, PeakCI, ValueCI
+from fcrlive.constants import Z95
 
 NOT_IDENTIFIABLE = "not identifiable from this log"
 """How every reason of the width rule begins (lowband's coherence gate says the same)."""
@@ -105,6 +108,107 @@ def zur_not_converged(converged: bool, stop_reason: str) -> dict[str, str]:
         return {}
     why = ZUR_NOT_CONVERGED.format(stop=stop_reason or "no stop reason given")
     return dict.fromkeys(ZUR_QUANTITIES, why)
+
+
+SEARCH_SHORT_SE = 0.5
+"""A quantity of a Z_ur fit whose search stopped short is withheld when one exact Newton step from the
+fit's end point moves it by more than this many of its standard errors (:func:`search_short`)."""
+
+SEARCH_SHORT = (
+    "Z_ur search stopped short of the minimum ({stop}): one exact Newton step from its end point moves "
+    "{label} from {before} to {after}, {moved:.1f} standard errors (more than {limit:g}); "
+    f"{NOT_IDENTIFIABLE} until the search reaches the minimum"
+)
+"""Reason of a Z_ur quantity the Newton step moved too far (:func:`search_short`)."""
+
+SEARCH_SHORT_NOTE = (
+    "Z_ur search stopped short of the minimum ({stop}); one exact Newton step from its end point moved "
+    "each quantity shown by less than {limit:g} standard errors"
+)
+
+
+def _moved_se(value: float, after: float, ci95: tuple[float | None, float | None]) -> float:
+    """|after − value| in standard errors of ``value``, the half-width of its 95 % interval on the side
+    the step moved to (the droop's interval is not symmetric, a peak's may be cut at 0); inf when that
+    half-width is unknown or zero (the width rule withholds such a value anyway)."""
+    lo, hi = ci95
+    end = hi if after >= value else lo
+    if end is None or not math.isfinite(end) or not math.isfinite(after):
+        return math.inf
+    se = abs(end - value) / Z95
+    return abs(after - value) / se if se > 0 else math.inf
+
+
+def search_short(
+    report: IdentifyReport, stepped: IdentifyReport, stop_reason: str, *, limit: float = SEARCH_SHORT_SE
+) -> tuple[dict[str, str], str | None]:
+    """``not_identifiable`` entries of a Z_ur fit whose search stopped short of the minimum, given the
+    report of the same fit after one exact Newton step (``stepped``, :func:`fcrlive.ident.pem.newton_step`).
+
+    Only what the step moves by more than ``limit`` standard errors is withheld (:data:`SEARCH_SHORT`):
+    the rest sits at the minimum to within a fraction of its own uncertainty, which the interval already
+    states. G_p at the TSO periods (|G_p| against its interval, per period) decides ``gp`` and with it
+    the TSO checks. Returns the entries and a note for the report when something stays shown (None when
+    all is withheld or nothing was judged)."""
+    stop = stop_reason or "no stop reason given"
+    out: dict[str, str] = {}
+    for key, label, scale, unit in QUANTITIES:
+        a, b = getattr(report, key), getattr(stepped, key)
+        if a is None or a.value is None:
+            continue
+        after = b.value if b is not None and b.value is not None else math.nan
+        k = _moved_se(a.value, after, a.ci95)
+        if not k <= limit:
+            out[key] = SEARCH_SHORT.format(stop=stop, label=label, before=f"{_g(scale * a.value)}{unit}",
+                                           after=f"{_g(scale * after)}{unit}", moved=k, limit=limit)
+    if report.gp:
+        after = {p.period_s: p.abs for p in (stepped.gp or [])}
+        for p in report.gp:
+            k = _moved_se(p.abs, after.get(p.period_s, math.nan), p.abs_ci95)
+            if not k <= limit:
+                out["gp"] = SEARCH_SHORT.format(
+                    stop=stop, label=f"|G_p| at T = {p.period_s:g} s", before=_g(p.abs),
+                    after=_g(after.get(p.period_s, math.nan)), moved=k, limit=limit)
+                out["tso"] = out["gp"]
+                break
+    shown = [k for k, *_ in QUANTITIES if getattr(report, k) is not None
+             and getattr(report, k).value is not None and k not in out]
+    if not (shown or (report.gp and "gp" not in out)):
+        return out, None
+    note = SEARCH_SHORT_NOTE.format(stop=stop, limit=limit)
+    return out, note
+
+
+ZUR_MIN_COHERENCE = 0.6
+"""Smallest r-ε coherence at the frequency of Z_ur's max|S| for S (and G_p, the TSO checks) to be shown
+(:func:`zur_process_noise`)."""
+
+ZUR_PROCESS_NOISE = (
+    f"{NOT_IDENTIFIABLE}: process noise reaches the electric power and biases Z_ur's S (paper Remark 7): "
+    "the excitation explains only {coh:.2f} of ε at ω = {lo:.3g}-{omega:.3g} rad/s (mean r-ε coherence, "
+    "needs ≥ {thr:g}); log ContOutSig and GuideVane for Z_cu or excite more"
+)
+
+
+def zur_process_noise(max_s_omega: float | None, coherence, *, threshold: float = ZUR_MIN_COHERENCE
+                      ) -> dict[str, str]:
+    """``not_identifiable`` entries for Z_ur's S, G_p and TSO checks when the process noise is large
+    against the excitation where max|S| lies (Remark 7 of the paper: the noise reaching u through the
+    loop without a delay biases S; the fit's interval does not contain that bias).
+
+    ``coherence``: ω → r-ε coherence (:func:`fcrlive.analysis.experiments.excitation_coherence`).
+    Measured on paper-plant1, 30-min logs, seeds 0-9 (docs/identify.md): at 30 dB the coherence at
+    0.2-0.4 rad/s was 0.63-0.77 and max|S| within −0.8..+2.3 %; at 12 dB 0.32-0.53 and max|S| +5..+26 %
+    with ±7-9 % intervals (2 of 9 covering). The threshold sits between."""
+    if max_s_omega is None or coherence is None:
+        return {}
+    # Remark 7's bias moves the peak up to twice its true frequency: judge the band from half the found
+    # frequency to it (mean over 32 points), not the one bin the peak happens to sit on
+    coh = float(np.mean(coherence(np.linspace(0.5 * max_s_omega, max_s_omega, 32))))
+    if coh >= threshold:
+        return {}
+    why = ZUR_PROCESS_NOISE.format(coh=coh, lo=0.5 * max_s_omega, omega=max_s_omega, thr=threshold)
+    return dict.fromkeys(("max_abs_s", "gp", "tso"), why)
 
 
 def _null(key: str, reason: str) -> ValueCI:
