@@ -240,3 +240,37 @@ def test_zur_process_noise_gates_s_by_the_excitation_coherence():
     assert "0.3-0.6 rad/s" in ni["max_abs_s"]
     assert quality.zur_process_noise(0.6, high) == {}
     assert quality.zur_process_noise(None, low) == {}
+
+
+# -- Z_u's max|G_1|: the errors-in-variables bias bound ------------------------------------------------
+
+def _coh(g_ue: float, g_ur: float) -> dict:
+    return {"u-epsilon": lambda w: np.full(np.shape(w), g_ue),
+            "u-residual": lambda w: np.full(np.shape(w), g_ur)}
+
+
+def test_zu_eiv_widens_max_g1_by_the_bias_bound():
+    rep = _report(method="zu", max_abs_s=None, tso=None)  # max|G_1| 1.0 [0.95, 1.05] at 0.2 rad/s
+    out, ni, note = quality.zu_eiv(rep, _coh(0.8, 0.16), low_edge_omega=1e-3)
+    b = math.sqrt(0.2 / 0.8 * 0.16)  # 0.2: 20 % of the value
+    assert ni == {}
+    assert out.max_abs_g1.ci95 == pytest.approx((0.95 - b, 1.05 + b))
+    assert out.max_abs_g1.value == 1.0 and rep.max_abs_g1.ci95 == (0.95, 1.05)
+    assert "errors-in-variables bias bound" in note and "(20 %)" in note
+    # no feedback noise in u (residual uncorrelated with u): nothing to add
+    assert quality.zu_eiv(rep, _coh(0.8, 0.0), low_edge_omega=1e-3)[0].max_abs_g1.ci95 == pytest.approx(
+        (0.95, 1.05))
+
+
+def test_zu_eiv_withholds_a_bound_wider_than_the_value_and_a_max_at_the_low_edge():
+    rep = _report(method="zu", max_abs_s=None, tso=None)
+    _, ni, note = quality.zu_eiv(rep, _coh(0.6, 0.5), low_edge_omega=1e-3)  # bound 58 %
+    assert note is None
+    assert ni["max_abs_g1"].startswith(quality.NOT_IDENTIFIABLE)
+    assert "wider than the value" in ni["max_abs_g1"]
+    assert "u-ε coherence 0.60, u-residual coherence 0.50" in ni["max_abs_g1"]
+    assert quality.withhold(rep, ni).max_abs_g1.value is None
+    edge = _report(method="zu", max_abs_s=None, tso=None,
+                   max_abs_g1=PeakCI(value=0.08, omega=1e-3, ci95=(0.079, 0.081)))
+    _, ni, _ = quality.zu_eiv(edge, _coh(0.9, 0.0), low_edge_omega=1e-3 / 0.9)
+    assert "no resonance" in ni["max_abs_g1"]

@@ -263,10 +263,12 @@ class ExperimentResult:
     """Z_ur whose search stopped short of the minimum: the responses after one exact Newton step from the
     fit (:func:`fcrlive.ident.pem.newton_step`); how far each quantity moves with it, in its standard
     errors, decides whether it is shown (:func:`fcrlive.analysis.quality.search_short`). None otherwise."""
-    coherence: Callable[[np.ndarray], np.ndarray] | None = None
-    """Z_ur: ω [rad/s] → the magnitude-squared coherence of r and ε in the log (Welch,
-    :func:`excitation_coherence`): the share of ε the excitation explains, which Remark 7's bias of S
-    follows (:func:`fcrlive.analysis.quality.zur_process_noise`). None for the other methods."""
+    coherence: dict[str, Callable[[np.ndarray], np.ndarray]] | None = None
+    """ω [rad/s] → magnitude-squared coherence (Welch, :func:`coherence_fn`) of two signals of the
+    identification data. Z_ur: "r-epsilon", the share of ε the excitation explains, which Remark 7's bias
+    of S follows (:func:`fcrlive.analysis.quality.zur_process_noise`). Z_u: "u-epsilon" and "u-residual"
+    (u and the fit's residual: the feedback's share of the noise in u), for the errors-in-variables bound
+    of max|G_1| (:func:`fcrlive.analysis.quality.zu_eiv`). None for the other methods."""
 
     @property
     def omega_max(self) -> float:
@@ -738,6 +740,8 @@ def zur(
         except (IdentError, ValueError, np.linalg.LinAlgError):
             newton = None
     val, warns = _validate({"ε ← (u, r)": (m, d)})
+    nper = round(COHERENCE_NPERSEG / prep.Ts)
+    coh_re = coherence_fn(prep.signals["r"], prep.signals["epsilon"], prep.Ts, nper)
     warns.append(
         "Z_ur is biased when process noise reaches the electric power (paper Remark 7): on the paper's "
         "plant at 12 dB max|S| came out up to 25 % high and the intervals of S and G_p do not cover that "
@@ -745,22 +749,22 @@ def zur(
     )
     return ExperimentResult(
         "zur", prep.Ts, d.N, prep.duration_s, {"epsilon<-(u,r)": m}, responses, ("G_1", "S", "G_p"), None,
-        val, tuple(warns), (), newton, excitation_coherence(prep),
+        val, tuple(warns), (), newton, {"r-epsilon": coh_re},
     )
 
 
-COHERENCE_NPERSEG = 512
-"""Welch segment length [samples] of :func:`excitation_coherence` (256 s at 0.5 s: 0.025 rad/s bins)."""
+COHERENCE_NPERSEG = 256
+"""Welch segment length [samples] of :func:`coherence_fn`: 256 s at Z_u's 1 s, Z_ur uses 512 at 0.5 s
+(the same 256 s, 0.025 rad/s bins)."""
 
 
-def excitation_coherence(
-    prep: Prepared, x: str = "r", y: str = "epsilon"
+def coherence_fn(
+    a: np.ndarray, b: np.ndarray, Ts: float, nperseg: int = COHERENCE_NPERSEG
 ) -> Callable[[np.ndarray], np.ndarray]:
-    """ω → magnitude-squared coherence of ``x`` and ``y`` (Welch over the concatenated decimated segments,
-    Hann windows of :data:`COHERENCE_NPERSEG`), linearly interpolated between the bins."""
-    a, b = prep.signals[x], prep.signals[y]
-    nper = int(min(COHERENCE_NPERSEG, a.size))
-    f, c = sps.coherence(a, b, fs=1.0 / prep.Ts, nperseg=nper)
+    """ω → magnitude-squared coherence of ``a`` and ``b`` (Welch over the concatenated decimated segments,
+    Hann windows of ``nperseg`` samples), linearly interpolated between the bins."""
+    nper = int(min(nperseg, a.size))
+    f, c = sps.coherence(a, b, fs=1.0 / Ts, nperseg=nper)
     w_bins = 2.0 * np.pi * f
 
     def coherence(omega) -> np.ndarray:
@@ -828,9 +832,15 @@ def zu(
 
     val, warns = _validate({"ε ← u": (m, d)})
     warns.append("no excitation: S and G_p cannot be identified from this log (paper Section 6.3)")
+    u = d.u[:, 0]
+    try:
+        coh = {"u-epsilon": coherence_fn(u, d.y, prep.Ts, round(COHERENCE_NPERSEG / prep.Ts)),
+               "u-residual": coherence_fn(u, m.residuals(d), prep.Ts, round(COHERENCE_NPERSEG / prep.Ts))}
+    except (IdentError, ValueError):
+        coh = None
     return ExperimentResult(
         "zu", prep.Ts, d.N, prep.duration_s, {"epsilon<-u": m}, responses, ("G_1",), None, val, tuple(warns),
-        tuple(notes),
+        tuple(notes), None, coh,
     )
 
 

@@ -31,7 +31,7 @@ import numpy as np
 from fcrlive.analysis import experiments as ex
 from fcrlive.analysis import lowband as lb
 from fcrlive.analysis import quality
-from fcrlive.analysis.assess import PEAK_MIN_PERIOD_S, Assessment, assess, peak_band
+from fcrlive.analysis.assess import OMEGA_MIN, PEAK_MIN_PERIOD_S, Assessment, assess, peak_band
 from fcrlive.analysis.controller import ControllerFitError
 from fcrlive.analysis.report import IdentifyReport, build_report
 from fcrlive.constants import F0_HZ
@@ -167,6 +167,11 @@ def identify_full(
     )
     ni, note = _not_identifiable(res, kd=kd, t_fme_s=t_fme_s, peak_min_period_s=peak_min_period_s)
     rep = res.report
+    if rep.method == "zu":
+        # the errors-in-variables bound of Z_u's max|G_1| (quality.zu_eiv), before the width rule
+        rep, ni_eiv, note = quality.zu_eiv(rep, res.experiment.coherence,
+                                           low_edge_omega=OMEGA_MIN / PEAK_EDGE_FRACTION)
+        ni.update(ni_eiv)
     if note:
         rep = rep.model_copy(update={"notes": [*rep.notes, note]})
     return replace(res, report=quality.withhold(rep, ni))
@@ -181,7 +186,8 @@ def _not_identifiable(res: Identification, *, kd: float = 0.0, t_fme_s: float | 
     rep, exp = res.report, res.experiment
     if rep.method == "zur":
         fit = exp.models["epsilon<-(u,r)"].report
-        noise = quality.zur_process_noise(rep.max_abs_s.omega if rep.max_abs_s else None, exp.coherence)
+        noise = quality.zur_process_noise(rep.max_abs_s.omega if rep.max_abs_s else None,
+                                          (exp.coherence or {}).get("r-epsilon"))
         if fit.converged or exp.newton is None:
             return {**noise, **quality.zur_not_converged(fit.converged, fit.stop_reason)}, None
         a2 = assess(replace(exp, responses=exp.newton), kd=kd, t_fme_s=t_fme_s,

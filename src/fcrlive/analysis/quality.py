@@ -211,6 +211,62 @@ def zur_process_noise(max_s_omega: float | None, coherence, *, threshold: float 
     return dict.fromkeys(("max_abs_s", "gp", "tso"), why)
 
 
+ZU_EIV_NOTE = (
+    "max|G_1| interval widened by ±{b:.3g} ({pct:.0f} %), the errors-in-variables bias bound of Z_u at "
+    "ω = {omega:.3g} rad/s: u-ε coherence {g_ue:.2f}, u-residual coherence {g_ur:.2f} (the process noise "
+    "reaches u through the loop)"
+)
+
+ZU_EIV = (
+    f"{NOT_IDENTIFIABLE}: " + "max|G_1| {value} with the errors-in-variables bias bound ±{b:.3g} of Z_u "
+    "(u-ε coherence {g_ue:.2f}, u-residual coherence {g_ur:.2f} at ω = {omega:.3g} rad/s: the process noise "
+    "reaches u through the loop) has a 95 % interval [{lo}, {hi}] wider than the value; an excitation "
+    "(Z_ur, Z_cu) removes that bias"
+)
+
+ZU_LOW_EDGE = (
+    f"{NOT_IDENTIFIABLE}: " + "the Z_u fit has no resonance (max|G_1| at the low end of the band, "
+    "ω = {omega:.3g} rad/s: the static gain, not a peak)"
+)
+
+
+def zu_eiv(report: IdentifyReport, coherence: Mapping | None, *, low_edge_omega: float
+           ) -> tuple[IdentifyReport, dict[str, str], str | None]:
+    """Z_u's max|G_1| with the errors-in-variables bias bound in its interval, or withheld.
+
+    Without an excitation u is driven by the process noise through the loop, so the noise in ε is
+    correlated with u and the fit of G_1 = ε/u is biased; the fit's covariance does not contain that.
+    With γ²_uε the coherence of u and ε and γ²_uê that of u and the fit's residual at the peak's ω (the
+    share of the noise that the feedback put into u), the relative bias is at most
+    √((1 − γ²_uε)/γ²_uε · γ²_uê) (the residual's cross-spectrum with u over u's spectrum, against
+    |G_1|). The interval is widened by that bound × |max|G_1|| on both sides, then the width rule applies
+    (:data:`ZU_EIV` when it is too wide). A maximum at the band's low end (``low_edge_omega``) is the
+    static gain of a fit without a resonance (:data:`ZU_LOW_EDGE`). ``coherence``: "u-epsilon" and
+    "u-residual", ω → γ² (:attr:`fcrlive.analysis.experiments.ExperimentResult.coherence`).
+
+    Returns the report (max|G_1|'s interval widened), ``not_identifiable`` entries and a note."""
+    pk = report.max_abs_g1
+    if pk is None or pk.value is None or pk.omega is None or not coherence:
+        return report, {}, None
+    if pk.omega <= low_edge_omega:
+        return report, {"max_abs_g1": ZU_LOW_EDGE.format(omega=pk.omega)}, None
+    w = np.array([pk.omega])
+    g_ue = float(coherence["u-epsilon"](w)[0])
+    g_ur = float(coherence["u-residual"](w)[0])
+    rel = math.sqrt(max(1.0 - g_ue, 0.0) / g_ue * g_ur) if g_ue > 0 else math.inf
+    b = rel * abs(pk.value)
+    lo, hi = pk.ci95
+    if lo is None or hi is None:
+        return report, {}, None  # the width rule withholds it
+    lo2, hi2 = max(lo - b, 0.0), hi + b
+    fmt = dict(b=b, g_ue=g_ue, g_ur=g_ur, omega=pk.omega)
+    if not hi2 - lo2 <= abs(pk.value):
+        why = ZU_EIV.format(value=_g(pk.value), lo=_g(lo2), hi=_g(hi2), **fmt)
+        return report, {"max_abs_g1": why}, None
+    widened = report.model_copy(update={"max_abs_g1": pk.model_copy(update={"ci95": (lo2, hi2)})})
+    return widened, {}, ZU_EIV_NOTE.format(pct=100.0 * rel, **fmt)
+
+
 def _null(key: str, reason: str) -> ValueCI:
     if key.startswith("max_abs"):
         return PeakCI(value=None, ci95=(None, None), omega=None, reason=reason)
