@@ -274,3 +274,50 @@ def test_zu_eiv_withholds_a_bound_wider_than_the_value_and_a_max_at_the_low_edge
                    max_abs_g1=PeakCI(value=0.08, omega=1e-3, ci95=(0.079, 0.081)))
     _, ni, _ = quality.zu_eiv(edge, _coh(0.9, 0.0), low_edge_omega=1e-3 / 0.9)
     assert "no resonance" in ni["max_abs_g1"]
+
+
+# -- G_p per TSO period ---------------------------------------------------------------------------------
+
+def _points(ci_at_10s=(0.3, 0.7)):
+    from fcrlive.analysis.report import PeriodValue
+
+    def pv(t, a, ci):
+        return PeriodValue(period_s=t, re=a, im=0.0, abs=a, phase_deg=0.0, abs_ci95=ci)
+
+    gp = [pv(10.0, 0.5, ci_at_10s), pv(60.0, 5.0, (4.8, 5.2)), pv(300.0, 10.0, (9.5, 10.5))]
+    f = [pv(10.0, 0.04, (0.016, 0.064)), pv(60.0, 0.4, (0.38, 0.42)), pv(300.0, 0.8, (0.76, 0.84))]
+    return gp, f
+
+
+def test_a_gp_point_wider_than_itself_is_null_with_its_reason_and_the_tso_verdict_undecided():
+    gp, f = _points(ci_at_10s=(0.0, 1.1))  # 0.5 in [0, 1.1]: wider than the value
+    rep = _report(gp=gp, f=f)
+    out = quality.withhold(rep)
+    p10 = out.gp[0]
+    assert p10.abs is None and p10.re is None and p10.phase_deg is None and p10.abs_ci95 == (None, None)
+    assert p10.reason.startswith(quality.NOT_IDENTIFIABLE) and "|G_p| at T = 10 s" in p10.reason
+    assert out.not_identifiable["gp_10s"] == p10.reason
+    assert out.f[0].abs is None and out.f[0].reason == p10.reason  # F at that period too
+    assert [p.abs for p in out.gp[1:]] == [5.0, 10.0] and [p.abs for p in out.f[1:]] == [0.4, 0.8]
+    v = out.tso["fcrn"]
+    assert v.verdict == "undecided" and v.passed  # the point verdict is kept, the decision is not
+    assert any("G_p at T = 10 s" in x and "not identifiable" in x for x in v.reasons)
+    assert rep.tso["fcrn"].verdict == "pass"  # the input report is not changed
+    assert "T = 10 s: not identifiable" in text_summary(out).replace("        ", "")
+
+
+def test_usable_gp_points_leave_the_report_alone():
+    gp, f = _points()
+    rep = _report(gp=gp, f=f)
+    assert quality.withhold(rep) is rep
+
+
+def test_search_short_nulls_only_the_gp_points_the_step_moved():
+    gp, f = _points()
+    rep = _report(method="zur", gp=gp, f=f)
+    moved = [p.model_copy(update={"abs": p.abs * (1.05 if p.period_s == 60.0 else 1.0)}) for p in gp]
+    ni, note = quality.search_short(rep, _report(method="zur", gp=moved), "x")
+    assert set(ni) == {"gp_60s"} and note is not None
+    out = quality.withhold(rep, ni)
+    assert out.gp[1].abs is None and out.gp[1].reason == ni["gp_60s"] and out.gp[0].abs == 0.5
+    assert out.tso["fcrn"].verdict == "undecided"

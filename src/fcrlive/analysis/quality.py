@@ -13,11 +13,17 @@ The rules, per scalar quantity (droop, G_1(0), max|G_1|, max|S|; :data:`QUANTITI
   uncertainty is unknown, never zero), of zero width, inverted, does not contain the value, or is wider
   than |value|. An interval wider than its value says the log cannot tell the value from zero or from
   twice itself: no number one can use.
-- :func:`zur_not_converged`: the Z_ur prediction-error search stopped without converging
-  (:data:`ZUR_NOT_CONVERGED`): every quantity of Z_ur (all come from that one fit) is withheld, with the
-  search's own stop reason.
+- :func:`zur_not_converged`: the Z_ur prediction-error search stopped without converging and no exact
+  Newton step could be made from its end point (:data:`ZUR_NOT_CONVERGED`): every quantity of Z_ur (all
+  come from that one fit) is withheld, with the search's own stop reason.
 - the droop of a sine-test evaluation is the plant description's setting, not a measurement
   (:data:`SINE_DROOP`).
+- per TSO period: G_p (and F) at a period whose |G_p| interval fails the width rule is null with the
+  reason (key ``gp_<T>s``, :func:`gp_key`), and the TSO verdicts, which span the whole band, become
+  ``undecided`` with the reason (:func:`withhold`).
+- Z_ur: :func:`search_short` (a search that stopped short: only what one exact Newton step moves by more
+  than half a standard error) and :func:`zur_process_noise` (Remark 7: S, G_p and TSO withheld at low
+  r-ε coherence); Z_u: :func:`zu_eiv` (max|G_1|'s interval widened by the errors-in-variables bias bound).
 
 Pure: no I/O. Units as in the report (droop a fraction, shown in % in the reasons).
 """
@@ -29,7 +35,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from fcrlive.analysis.report import IdentifyReport, PeakCI, ValueCI
+from fcrlive.analysis.report import IdentifyReport, PeakCI, PeriodValue, ValueCI
 from fcrlive.constants import Z95
 
 NOT_IDENTIFIABLE = "not identifiable from this log"
@@ -147,9 +153,9 @@ def search_short(
 
     Only what the step moves by more than ``limit`` standard errors is withheld (:data:`SEARCH_SHORT`):
     the rest sits at the minimum to within a fraction of its own uncertainty, which the interval already
-    states. G_p at the TSO periods (|G_p| against its interval, per period) decides ``gp`` and with it
-    the TSO checks. Returns the entries and a note for the report when something stays shown (None when
-    all is withheld or nothing was judged)."""
+    states. G_p at the TSO periods is judged per period (|G_p| against its interval, key
+    :func:`gp_key`); :func:`withhold` then makes the TSO verdicts undecided. Returns the entries and a
+    note for the report when something stays shown (None when all is withheld or nothing was judged)."""
     stop = stop_reason or "no stop reason given"
     out: dict[str, str] = {}
     for key, label, scale, unit in QUANTITIES:
@@ -164,16 +170,18 @@ def search_short(
     if report.gp:
         after = {p.period_s: p.abs for p in (stepped.gp or [])}
         for p in report.gp:
-            k = _moved_se(p.abs, after.get(p.period_s, math.nan), p.abs_ci95)
+            if p.abs is None:
+                continue
+            a = after.get(p.period_s)
+            a = math.nan if a is None else a
+            k = _moved_se(p.abs, a, p.abs_ci95)
             if not k <= limit:
-                out["gp"] = SEARCH_SHORT.format(
-                    stop=stop, label=f"|G_p| at T = {p.period_s:g} s", before=_g(p.abs),
-                    after=_g(after.get(p.period_s, math.nan)), moved=k, limit=limit)
-                out["tso"] = out["gp"]
-                break
+                out[gp_key(p.period_s)] = SEARCH_SHORT.format(
+                    stop=stop, label=f"|G_p| at T = {p.period_s:g} s", before=_g(p.abs), after=_g(a), moved=k,
+                    limit=limit)
     shown = [k for k, *_ in QUANTITIES if getattr(report, k) is not None
              and getattr(report, k).value is not None and k not in out]
-    if not (shown or (report.gp and "gp" not in out)):
+    if not (shown or any(gp_key(p.period_s) not in out for p in report.gp or [])):
         return out, None
     note = SEARCH_SHORT_NOTE.format(stop=stop, limit=limit)
     return out, note
@@ -196,7 +204,7 @@ def zur_process_noise(max_s_omega: float | None, coherence, *, threshold: float 
     against the excitation where max|S| lies (Remark 7 of the paper: the noise reaching u through the
     loop without a delay biases S; the fit's interval does not contain that bias).
 
-    ``coherence``: ω → r-ε coherence (:func:`fcrlive.analysis.experiments.excitation_coherence`).
+    ``coherence``: ω → r-ε coherence (:func:`fcrlive.analysis.experiments.coherence_fn`).
     Measured on paper-plant1, 30-min logs, seeds 0-9 (docs/identify.md): at 30 dB the coherence at
     0.2-0.4 rad/s was 0.63-0.77 and max|S| within −0.8..+2.3 %; at 12 dB 0.32-0.53 and max|S| +5..+26 %
     with ±7-9 % intervals (2 of 9 covering). The threshold sits between."""
@@ -273,13 +281,64 @@ def _null(key: str, reason: str) -> ValueCI:
     return ValueCI(value=None, ci95=(None, None), reason=reason)
 
 
+def gp_key(period_s: float) -> str:
+    """``not_identifiable`` key of G_p (and F) at one TSO period, e.g. "gp_10s"."""
+    return f"gp_{period_s:g}s"
+
+
+TSO_UNDECIDED = (
+    "undecided: G_p at T = {periods} s, within the band the check spans, is not identifiable from this log"
+)
+"""Reason added to a TSO verdict made undecided by a withheld G_p point (:func:`withhold`)."""
+
+
+def _null_point(p: PeriodValue, reason: str) -> PeriodValue:
+    return PeriodValue(period_s=p.period_s, re=None, im=None, abs=None, phase_deg=None, abs_ci95=(None, None),
+                       reason=reason)
+
+
+def _period_update(report: IdentifyReport, given: Mapping[str, str], ni: dict[str, str],
+                   warn) -> dict:
+    """G_p and F per TSO period: a point in ``given`` (key :func:`gp_key`) or whose |G_p| interval fails
+    the width rule is null with the reason, F at that period too; the TSO verdicts (each spans the whole
+    10-300 s band) become undecided, saying which periods."""
+    if not report.gp:
+        return {}
+    nulled: dict[float, str] = {}
+    for p in report.gp:
+        key = gp_key(p.period_s)
+        if p.abs is None:
+            continue
+        label = f"|{report.gp_kind}| at T = {p.period_s:g} s"
+        why = given.get(key) or withhold_wide(p.abs, p.abs_ci95, label=label)
+        if why is not None:
+            nulled[p.period_s] = why
+            ni[key] = why
+            warn(why)
+    if not nulled:
+        return {}
+    upd: dict = {"gp": [_null_point(p, nulled[p.period_s]) if p.period_s in nulled else p for p in report.gp]}
+    if report.f:
+        upd["f"] = [_null_point(p, nulled[p.period_s]) if p.period_s in nulled else p for p in report.f]
+    if report.tso:
+        why = TSO_UNDECIDED.format(periods=", ".join(f"{t:g}" for t in nulled))
+        upd["tso"] = {
+            k: v.model_copy(update={"decision": "undecided",
+                                    "reasons": [*v.reasons, why] if why not in v.reasons else v.reasons})
+            for k, v in report.tso.items()
+        }
+    return upd
+
+
 def withhold(report: IdentifyReport, not_identifiable: Mapping[str, str] | None = None) -> IdentifyReport:
     """The report with every rule applied (module docstring): the quantities in ``not_identifiable``
     (key -> reason, e.g. :func:`zur_not_converged`; they override the report's) and those the width rule
     rejects null with their reason, listed in the report's ``not_identifiable``, each reason once in the
     warnings. ``gp`` in ``not_identifiable`` nulls G_p, F and the TSO checks, ``tso`` the TSO checks,
-    ``max_abs_s`` also the local checks (eq. 9-10, margins: the same S and loop). The report itself when
-    nothing is withheld."""
+    ``max_abs_s`` also the local checks (eq. 9-10, margins: the same S and loop). Otherwise G_p is judged
+    per TSO period (:func:`_period_update`: key :func:`gp_key` given, or the width rule on |G_p|): a null
+    point nulls F at that period and makes every TSO verdict undecided. The report itself when nothing is
+    withheld."""
     given = dict(not_identifiable or {})
     ni = {**report.not_identifiable, **given}
     update: dict = {}
@@ -304,6 +363,8 @@ def withhold(report: IdentifyReport, not_identifiable: Mapping[str, str] | None 
             warn(why)
     if "gp" in given:  # the TSO checks are made from G_p
         update.update(gp=None, f=None, tso=None)
+    else:
+        update.update(_period_update(report, given, ni, warn))
     if "tso" in given:
         update["tso"] = None
     if "max_abs_s" in given:  # eq. 9-10 and the loop margins come from the same S and L
