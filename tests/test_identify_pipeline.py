@@ -110,12 +110,13 @@ def _zur_report_is_honest(res) -> None:
     """What a Z_ur report may show hangs on its search's verdict (analysis.quality): a search that stopped
     short of the minimum (measured: 8-10 of 10 30-min logs, 12 and 30 dB) withholds exactly what one exact
     Newton step from its end point moves by more than SEARCH_SHORT_SE standard errors (recomputed here from
-    the experiment's own step); where the r-ε coherence at max|S| is low (Remark 7), S, G_p and the TSO
-    checks are withheld with that reason."""
+    the experiment's own step); where the process noise makes a share of u near max|S| (Remark 7), S, G_p
+    and the TSO checks are withheld with that reason."""
     fit = res.experiment.models["epsilon<-(u,r)"].report
     r, a = res.report, res.assessment
     assert not any("Z_ur search did not converge" in x for x in r.not_identifiable.values())
-    noise = quality.zur_process_noise(a.max_s.omega, res.experiment.coherence["r-epsilon"])
+    noise = quality.zur_process_noise(a.max_s.omega, res.experiment.coherence["u-residual"],
+                                      max_g1_omega=a.max_g1.omega)
     for key, why in noise.items():
         assert r.not_identifiable[key] == why
     assert (r.gp is None) == ("gp" in r.not_identifiable)

@@ -231,15 +231,22 @@ def test_search_short_uses_the_side_of_the_interval_the_step_goes_to():
     assert "max_abs_g1" in quality.search_short(rep, gone, "x")[0]
 
 
-def test_zur_process_noise_gates_s_by_the_excitation_coherence():
-    low = lambda w: np.full(np.shape(w), 0.45)  # noqa: E731
-    high = lambda w: np.full(np.shape(w), 0.75)  # noqa: E731
-    ni = quality.zur_process_noise(0.6, low)
-    assert set(ni) == {"max_abs_s", "gp", "tso"}
-    assert "paper Remark 7" in ni["max_abs_s"] and "0.45" in ni["max_abs_s"]
+def test_zur_process_noise_gates_s_by_the_noise_share_of_u():
+    noisy = lambda w: np.full(np.shape(w), 0.45)  # noqa: E731
+    quiet = lambda w: np.full(np.shape(w), 0.08)  # noqa: E731
+    ni = quality.zur_process_noise(0.6, noisy)
+    assert set(ni) == {"max_abs_s", "gp", "tso", "droop", "g1_static"}
+    assert "paper Remark 7" in ni["max_abs_s"] and "it makes 0.45 of u" in ni["max_abs_s"]
     assert "0.3-0.6 rad/s" in ni["max_abs_s"]
-    assert quality.zur_process_noise(0.6, high) == {}
-    assert quality.zur_process_noise(None, low) == {}
+    assert quality.zur_process_noise(0.6, quiet) == {}
+    assert set(quality.zur_process_noise(None, noisy)) == {"droop", "g1_static"}
+    assert "biases Z_ur's G_1(0) and droop" in quality.zur_process_noise(None, noisy)["droop"]
+    assert "max_abs_g1" in quality.zur_process_noise(None, noisy, max_g1_omega=0.2)
+    assert "biases Z_ur's G_1" in quality.zur_process_noise(None, noisy, max_g1_omega=0.2)["max_abs_g1"]
+    out = quality.withhold(_report(method="zur"), ni)
+    assert out.max_abs_s.value is None and out.gp is None and out.tso is None and out.local is None
+    assert out.droop.value is None and out.droop.reason == ni["droop"]
+    assert out.max_abs_g1.value == 1.0  # not asked for: judged by the other rules
 
 
 # -- Z_u's max|G_1|: the errors-in-variables bias bound ------------------------------------------------

@@ -54,6 +54,7 @@ Methods
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
@@ -265,10 +266,11 @@ class ExperimentResult:
     errors, decides whether it is shown (:func:`fcrlive.analysis.quality.search_short`). None otherwise."""
     coherence: dict[str, Callable[[np.ndarray], np.ndarray]] | None = None
     """ω [rad/s] → magnitude-squared coherence (Welch, :func:`coherence_fn`) of two signals of the
-    identification data. Z_ur: "r-epsilon", the share of ε the excitation explains, which Remark 7's bias
-    of S follows (:func:`fcrlive.analysis.quality.zur_process_noise`). Z_u: "u-epsilon" and "u-residual"
-    (u and the fit's residual: the feedback's share of the noise in u), for the errors-in-variables bound
-    of max|G_1| (:func:`fcrlive.analysis.quality.zu_eiv`). None for the other methods."""
+    identification data. "u-residual": u and the fit's residual, the share of u that the process noise
+    put there through the loop (the condition of the paper's Remark 7), Z_ur's gate of S
+    (:func:`fcrlive.analysis.quality.zur_process_noise`) and, with "u-epsilon", Z_u's errors-in-variables
+    bound of max|G_1| (:func:`fcrlive.analysis.quality.zu_eiv`). Z_ur also "r-epsilon" (the share of ε the
+    excitation explains, for studies). None for the other methods."""
 
     @property
     def omega_max(self) -> float:
@@ -741,7 +743,9 @@ def zur(
             newton = None
     val, warns = _validate({"ε ← (u, r)": (m, d)})
     nper = round(COHERENCE_NPERSEG / prep.Ts)
-    coh_re = coherence_fn(prep.signals["r"], prep.signals["epsilon"], prep.Ts, nper)
+    coh = {"r-epsilon": coherence_fn(prep.signals["r"], prep.signals["epsilon"], prep.Ts, nper)}
+    with contextlib.suppress(IdentError, ValueError):
+        coh["u-residual"] = coherence_fn(d.u[:, 0], m.residuals(d), prep.Ts, nper)
     warns.append(
         "Z_ur is biased when process noise reaches the electric power (paper Remark 7): on the paper's "
         "plant at 12 dB max|S| came out up to 25 % high and the intervals of S and G_p do not cover that "
@@ -749,7 +753,7 @@ def zur(
     )
     return ExperimentResult(
         "zur", prep.Ts, d.N, prep.duration_s, {"epsilon<-(u,r)": m}, responses, ("G_1", "S", "G_p"), None,
-        val, tuple(warns), (), newton, {"r-epsilon": coh_re},
+        val, tuple(warns), (), newton, coh,
     )
 
 

@@ -187,7 +187,8 @@ def _not_identifiable(res: Identification, *, kd: float = 0.0, t_fme_s: float | 
     if rep.method == "zur":
         fit = exp.models["epsilon<-(u,r)"].report
         noise = quality.zur_process_noise(rep.max_abs_s.omega if rep.max_abs_s else None,
-                                          (exp.coherence or {}).get("r-epsilon"))
+                                          (exp.coherence or {}).get("u-residual"),
+                                          max_g1_omega=rep.max_abs_g1.omega if rep.max_abs_g1 else None)
         if fit.converged or exp.newton is None:
             return {**noise, **quality.zur_not_converged(fit.converged, fit.stop_reason)}, None
         a2 = assess(replace(exp, responses=exp.newton), kd=kd, t_fme_s=t_fme_s,

@@ -22,8 +22,9 @@ The rules, per scalar quantity (droop, G_1(0), max|G_1|, max|S|; :data:`QUANTITI
   reason (key ``gp_<T>s``, :func:`gp_key`), and the TSO verdicts, which span the whole band, become
   ``undecided`` with the reason (:func:`withhold`).
 - Z_ur: :func:`search_short` (a search that stopped short: only what one exact Newton step moves by more
-  than half a standard error) and :func:`zur_process_noise` (Remark 7: S, G_p and TSO withheld at low
-  r-ε coherence); Z_u: :func:`zu_eiv` (max|G_1|'s interval widened by the errors-in-variables bias bound).
+  than half a standard error) and :func:`zur_process_noise` (Remark 7: the peaks, G_p and TSO withheld
+  where the process noise makes a share of u); Z_u: :func:`zu_eiv` (max|G_1|'s interval widened by the
+  errors-in-variables bias bound).
 
 Pure: no I/O. Units as in the report (droop a fraction, shown in % in the reasons).
 """
@@ -187,36 +188,56 @@ def search_short(
     return out, note
 
 
-ZUR_MIN_COHERENCE = 0.6
-"""Smallest r-ε coherence at the frequency of Z_ur's max|S| for S (and G_p, the TSO checks) to be shown
+ZUR_NOISE_BAND = (0.05, 0.5)
+"""ω band [rad/s] (periods 13-126 s) of the noise share judged for Z_ur's droop and G_1(0)
+(:func:`zur_process_noise`): the Welch estimate has no resolution nearer ω = 0, and the bias of the whole
+fit follows the share of the noise in u over the band the model is fitted on."""
+
+ZUR_MAX_NOISE_COHERENCE = 0.25
+"""Largest coherence of u and Z_ur's residual near max|S| for S (and G_p, the TSO checks) to be shown
 (:func:`zur_process_noise`)."""
 
 ZUR_PROCESS_NOISE = (
-    f"{NOT_IDENTIFIABLE}: process noise reaches the electric power and biases Z_ur's S (paper Remark 7): "
-    "the excitation explains only {coh:.2f} of ε at ω = {lo:.3g}-{omega:.3g} rad/s (mean r-ε coherence, "
-    "needs ≥ {thr:g}); log ContOutSig and GuideVane for Z_cu or excite more"
+    f"{NOT_IDENTIFIABLE}: process noise reaches the electric power and biases Z_ur's "
+    "{what} (paper Remark 7): it makes {coh:.2f} of u at ω = {lo:.3g}-{omega:.3g} rad/s (mean coherence "
+    "of u and the residual, needs ≤ {thr:g}); log ContOutSig and GuideVane for Z_cu or excite more"
 )
 
 
-def zur_process_noise(max_s_omega: float | None, coherence, *, threshold: float = ZUR_MIN_COHERENCE
-                      ) -> dict[str, str]:
-    """``not_identifiable`` entries for Z_ur's S, G_p and TSO checks when the process noise is large
-    against the excitation where max|S| lies (Remark 7 of the paper: the noise reaching u through the
-    loop without a delay biases S; the fit's interval does not contain that bias).
+def zur_process_noise(max_s_omega: float | None, coherence, *, max_g1_omega: float | None = None,
+                      threshold: float = ZUR_MAX_NOISE_COHERENCE) -> dict[str, str]:
+    """``not_identifiable`` entries for Z_ur's S, G_p and TSO checks when the process noise's share of u is
+    not negligible where max|S| lies, for max|G_1| likewise where it lies (``max_g1_omega``), and for the
+    droop and G_1(0) over :data:`ZUR_NOISE_BAND`. The
+    paper's Remark 7: the noise reaches u through the loop without a delay, so the direct fit is biased,
+    "limited if the contribution of the process noise in u is negligible"; the fit's interval does not
+    contain that bias. The share is the coherence of u and the fit's residual, the mean from half the
+    found peak frequency to it (the bias moves the peak up to twice its true frequency; a mean, not the
+    one bin the peak sits on).
 
-    ``coherence``: ω → r-ε coherence (:func:`fcrlive.analysis.experiments.coherence_fn`).
-    Measured on paper-plant1, 30-min logs, seeds 0-9 (docs/identify.md): at 30 dB the coherence at
-    0.2-0.4 rad/s was 0.63-0.77 and max|S| within −0.8..+2.3 %; at 12 dB 0.32-0.53 and max|S| +5..+26 %
-    with ±7-9 % intervals (2 of 9 covering). The threshold sits between."""
-    if max_s_omega is None or coherence is None:
+    ``coherence``: ω → that coherence (:attr:`fcrlive.analysis.experiments.ExperimentResult.coherence`,
+    "u-residual"). Measured on paper-plant1, 30-min logs, seeds 0-9 (docs/identify.md): 0.02-0.13 at
+    30 dB in every band of 0.1-0.7 rad/s (max|S| −0.8 … +2.3 %), 0.32-0.62 at 12 dB (max|S| +5 … +26 %,
+    intervals ±7-9 %, 2 of 10 covering; max|G_1| −12 … +6 %, 5 of 8 covering; the droop −1 … 0 % of its
+    value, ≤ 0.08 percentage points, covering on 5 of 10, one record in a wrong basin at +26 %). The droop
+    and G_1(0) are judged over :data:`ZUR_NOISE_BAND`. The r-ε coherence tried first overlapped (0.43-0.69 vs
+    0.35-0.60)."""
+    if coherence is None:
         return {}
-    # Remark 7's bias moves the peak up to twice its true frequency: judge the band from half the found
-    # frequency to it (mean over 32 points), not the one bin the peak happens to sit on
-    coh = float(np.mean(coherence(np.linspace(0.5 * max_s_omega, max_s_omega, 32))))
-    if coh >= threshold:
-        return {}
-    why = ZUR_PROCESS_NOISE.format(coh=coh, lo=0.5 * max_s_omega, omega=max_s_omega, thr=threshold)
-    return dict.fromkeys(("max_abs_s", "gp", "tso"), why)
+    out: dict[str, str] = {}
+    lo_band, hi_band = ZUR_NOISE_BAND
+    for lo, hi, what, keys in (
+        (lo_band, hi_band, "G_1(0) and droop", ("droop", "g1_static")),
+        *(((0.5 * max_g1_omega, max_g1_omega, "G_1", ("max_abs_g1",)),) if max_g1_omega else ()),
+        *(((0.5 * max_s_omega, max_s_omega, "S", ("max_abs_s", "gp", "tso")),) if max_s_omega else ()),
+    ):
+        if not hi > 0:
+            continue
+        coh = float(np.mean(coherence(np.linspace(lo, hi, 32))))
+        if coh > threshold:
+            why = ZUR_PROCESS_NOISE.format(what=what, coh=coh, lo=lo, omega=hi, thr=threshold)
+            out.update(dict.fromkeys(keys, why))
+    return out
 
 
 ZU_EIV_NOTE = (
