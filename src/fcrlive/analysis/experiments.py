@@ -709,8 +709,11 @@ def zur(
     Known limits (paper Remark 7, Section 7.3), measured on paper-plant1 (docs/identify.md): exact on
     noise-free data and within 1 % at 30 dB, but at 12 dB the process noise reaching the electric power
     through the loop without a delay biases S at low frequencies and puts its peak up to 25 % high at
-    twice the true frequency. Every result carries a warning saying so; Z_cu is the method to use when
-    ContOutSig and GuideVane can be logged. The output-error loop form y ← (ε, u) that Z_cu's success
+    twice the true frequency. Every result carries a warning saying so, and the report withholds what the
+    process noise's share of u says is biased (:func:`fcrlive.analysis.quality.zur_process_noise`, from
+    ``coherence["u-residual"]``); Z_cu is the method to use when ContOutSig and GuideVane can be logged.
+    A search that stopped short of the minimum gets one exact Newton step (``newton``, judged by
+    :func:`fcrlive.analysis.quality.search_short`). The output-error loop form y ← (ε, u) that Z_cu's success
     suggests fails here even on noise-free data: ε and u are nearly collinear at low frequencies
     (ε ≈ G_1 u), so G_J G_p and G_J are not separated.
     """
