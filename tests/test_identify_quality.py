@@ -231,22 +231,29 @@ def test_search_short_uses_the_side_of_the_interval_the_step_goes_to():
     assert "max_abs_g1" in quality.search_short(rep, gone, "x")[0]
 
 
-def test_zur_process_noise_gates_s_by_the_noise_share_of_u():
+def test_zur_process_noise_gates_by_the_noise_share_of_u():
     noisy = lambda w: np.full(np.shape(w), 0.45)  # noqa: E731
     quiet = lambda w: np.full(np.shape(w), 0.08)  # noqa: E731
+    # noisy over the whole band the fit rests on: every quantity of Z_ur
     ni = quality.zur_process_noise(0.6, noisy)
-    assert set(ni) == {"max_abs_s", "gp", "tso", "droop", "g1_static"}
+    assert set(ni) == set(quality.ZUR_QUANTITIES)
     assert "paper Remark 7" in ni["max_abs_s"] and "it makes 0.45 of u" in ni["max_abs_s"]
-    assert "0.3-0.6 rad/s" in ni["max_abs_s"]
+    assert "0.05-0.5 rad/s" in ni["droop"] and "biases Z_ur's fit" in ni["droop"]
     assert quality.zur_process_noise(0.6, quiet) == {}
-    assert set(quality.zur_process_noise(None, noisy)) == {"droop", "g1_static"}
-    assert "biases Z_ur's G_1(0) and droop" in quality.zur_process_noise(None, noisy)["droop"]
-    assert "max_abs_g1" in quality.zur_process_noise(None, noisy, max_g1_omega=0.2)
-    assert "biases Z_ur's G_1" in quality.zur_process_noise(None, noisy, max_g1_omega=0.2)["max_abs_g1"]
     out = quality.withhold(_report(method="zur"), ni)
     assert out.max_abs_s.value is None and out.gp is None and out.tso is None and out.local is None
-    assert out.droop.value is None and out.droop.reason == ni["droop"]
-    assert out.max_abs_g1.value == 1.0  # not asked for: judged by the other rules
+    assert out.droop.value is None and out.droop.reason == ni["droop"] and out.max_abs_g1.value is None
+
+    # noisy only near S's peak (above the band): S, G_p and TSO only
+    def near_s(w):
+        return np.where(np.asarray(w) > 0.5, 0.45, 0.08)
+
+    ni = quality.zur_process_noise(1.2, near_s, max_g1_omega=0.2)
+    assert set(ni) == {"max_abs_s", "gp", "tso"} and "0.6-1.2 rad/s" in ni["max_abs_s"]
+    assert "biases Z_ur's S" in ni["max_abs_s"]
+    # and near G_1's peak only: max|G_1|
+    ni = quality.zur_process_noise(0.2, near_s, max_g1_omega=1.2)
+    assert set(ni) == {"max_abs_g1"} and "biases Z_ur's G_1" in ni["max_abs_g1"]
 
 
 # -- Z_u's max|G_1|: the errors-in-variables bias bound ------------------------------------------------
