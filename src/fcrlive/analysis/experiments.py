@@ -738,17 +738,16 @@ def zur(
     newton = None
     if not m.report.converged:
         # The search's Jacobian is not the exact one with ic="estimate" (ident.pem._IcProjection): it
-        # stopped short on 8-10 of 10 30-min logs of the paper's plant. One exact step from its end point
-        # shows which quantities that matters for (analysis.quality.search_short).
+        # stopped short on 8 of 10 30-min logs of the paper's plant at 30 dB, 10 of 10 at 12 dB. One exact
+        # step from its end point shows which quantities that matters for (analysis.quality.search_short).
         try:
             newton = responses_of(newton_step(m, d, ic=FIT["ic"]).model)
         except (IdentError, ValueError, np.linalg.LinAlgError):
             newton = None
     val, warns = _validate({"ε ← (u, r)": (m, d)})
-    nper = round(COHERENCE_NPERSEG / prep.Ts)
-    coh = {"r-epsilon": coherence_fn(prep.signals["r"], prep.signals["epsilon"], prep.Ts, nper)}
+    coh = {"r-epsilon": coherence_fn(prep.signals["r"], prep.signals["epsilon"], prep.Ts)}
     with contextlib.suppress(IdentError, ValueError):
-        coh["u-residual"] = coherence_fn(d.u[:, 0], m.residuals(d), prep.Ts, nper)
+        coh["u-residual"] = coherence_fn(d.u[:, 0], m.residuals(d), prep.Ts)
     warns.append(
         "Z_ur is biased when process noise reaches the electric power (paper Remark 7): on the paper's "
         "plant at 12 dB max|S| came out up to 25 % high and the intervals of S and G_p do not cover that "
@@ -760,17 +759,19 @@ def zur(
     )
 
 
-COHERENCE_NPERSEG = 256
-"""Welch segment length [samples] of :func:`coherence_fn`: 256 s at Z_u's 1 s, Z_ur uses 512 at 0.5 s
-(the same 256 s, 0.025 rad/s bins)."""
+COHERENCE_WINDOW_S = 256.0
+"""Welch window [s] of the coherences of Z_ur and Z_u (:func:`coherence_fn`): 0.025 rad/s bins, 7 windows
+in 15 min (14 with the half overlap)."""
 
 
 def coherence_fn(
-    a: np.ndarray, b: np.ndarray, Ts: float, nperseg: int = COHERENCE_NPERSEG
+    a: np.ndarray, b: np.ndarray, Ts: float, nperseg: int | None = None
 ) -> Callable[[np.ndarray], np.ndarray]:
     """ω → magnitude-squared coherence of ``a`` and ``b`` (Welch over the concatenated decimated segments,
-    Hann windows of ``nperseg`` samples), linearly interpolated between the bins."""
-    nper = int(min(nperseg, a.size))
+    Hann windows of ``nperseg`` samples, default :data:`COHERENCE_WINDOW_S`), linearly interpolated between
+    the bins. The residuals in it are from rest per record: their start transient is a small share of a
+    15-30 min log."""
+    nper = int(min(nperseg or round(COHERENCE_WINDOW_S / Ts), a.size))
     f, c = sps.coherence(a, b, fs=1.0 / Ts, nperseg=nper)
     w_bins = 2.0 * np.pi * f
 
@@ -841,8 +842,8 @@ def zu(
     warns.append("no excitation: S and G_p cannot be identified from this log (paper Section 6.3)")
     u = d.u[:, 0]
     try:
-        coh = {"u-epsilon": coherence_fn(u, d.y, prep.Ts, round(COHERENCE_NPERSEG / prep.Ts)),
-               "u-residual": coherence_fn(u, m.residuals(d), prep.Ts, round(COHERENCE_NPERSEG / prep.Ts))}
+        coh = {"u-epsilon": coherence_fn(u, d.y, prep.Ts),
+               "u-residual": coherence_fn(u, m.residuals(d), prep.Ts)}
     except (IdentError, ValueError):
         coh = None
     return ExperimentResult(
