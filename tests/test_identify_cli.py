@@ -63,14 +63,13 @@ def test_json_and_auto_method(files, case, capsys):
         assert set(doc["tso"]) == {"fcrn", "fcrd"}
         assert "pass" in doc["tso"]["fcrn"]
     if case == "zur":
-        # 15 min at 12 dB is too little for Z_ur (paper 7.3): the report must flag its bias; a search that
-        # did not converge (measured: every Z_ur log tried) gives no number at all, each null with why
+        # 15 min at 12 dB is too little for Z_ur (paper 7.3): the report must flag its bias; G_p (and the
+        # TSO checks) is either shown at the 10 periods or null with why (analysis.quality: the search's
+        # Newton step moved it, or Remark 7's low r-ε coherence)
         assert any("Z_ur is biased" in w for w in doc["warnings"])
-        why = doc["not_identifiable"].get("droop", "")
-        if why.startswith("Z_ur search did not converge"):
-            assert all(doc[k]["value"] is None and doc[k]["reason"] == why
-                       for k in ("droop", "g1_static", "max_abs_g1", "max_abs_s"))
-            assert doc["gp"] is None and doc["tso"] is None
+        if doc["gp"] is None:
+            assert doc["tso"] is None
+            assert doc["not_identifiable"]["gp"]
         else:
             assert len(doc["gp"]) == 10
             assert doc["tso"] is None or set(doc["tso"]) == {"fcrn", "fcrd"}

@@ -12,9 +12,11 @@ import numpy as np
 import pytest
 
 from fcrlive.analysis import experiments as ex
+from fcrlive.analysis import quality
+from fcrlive.analysis.assess import assess
 from fcrlive.analysis.identify import choose_method, identify_full
-from fcrlive.analysis.quality import ZUR_NOT_CONVERGED
 from fcrlive.analysis.tso_checks import assess_tso, normalise_gp
+from fcrlive.constants import Z95
 from fcrlive.plant import transfer as tr
 from fcrlive.plant.params import preset
 from fcrlive.sim import SimConfig, simulate
@@ -105,21 +107,39 @@ def test_zcu_accuracy_more_seeds(zcu_seeds, truth):
 
 
 def _zur_report_is_honest(res) -> None:
-    """What a Z_ur report may show hangs on its search's verdict (analysis.quality): a search that did not
-    converge gives every quantity null with ZUR_NOT_CONVERGED and its stop reason (measured: the case on
-    every Z_ur log tried, 12 and 30 dB, 15 and 30 min), G_p/F/TSO and the local checks none."""
+    """What a Z_ur report may show hangs on its search's verdict (analysis.quality): a search that stopped
+    short of the minimum (measured: 8-10 of 10 30-min logs, 12 and 30 dB) withholds exactly what one exact
+    Newton step from its end point moves by more than SEARCH_SHORT_SE standard errors (recomputed here from
+    the experiment's own step); where the process noise makes a share of u near max|S| (Remark 7), S, G_p
+    and the TSO checks are withheld with that reason."""
     fit = res.experiment.models["epsilon<-(u,r)"].report
-    r = res.report
-    if fit.converged:
-        assert not any("Z_ur search did not converge" in x for x in r.not_identifiable.values())
-        return
-    why = ZUR_NOT_CONVERGED.format(stop=fit.stop_reason)
-    for key in ("droop", "g1_static", "max_abs_g1", "max_abs_s"):
-        v = getattr(r, key)
-        assert v.value is None and v.ci95 == (None, None) and v.reason == why
+    r, a = res.report, res.assessment
+    assert not any("Z_ur search did not converge" in x for x in r.not_identifiable.values())
+    noise = quality.zur_process_noise(a.max_s.omega, res.experiment.coherence["u-residual"],
+                                      max_g1_omega=a.max_g1.omega)
+    for key, why in noise.items():
         assert r.not_identifiable[key] == why
-    assert r.gp is None and r.f is None and r.tso is None and r.local is None
-    assert r.warnings.count(why) == 1
+    assert (r.gp is None) == ("gp" in r.not_identifiable)
+    if fit.converged:
+        assert not any("stopped short" in x for x in r.not_identifiable.values())
+        return
+    assert res.experiment.newton is not None
+    a2 = assess(replace(res.experiment, responses=res.experiment.newton), kd=KD, products=())
+    for key, before, after in (("droop", a.droop, a2.droop), ("g1_static", a.g1_static, a2.g1_static)):
+        moved = abs(after.value - before.value) / (abs((before.hi if after.value >= before.value else
+                                                        before.lo) - before.value) / Z95)
+        if moved > quality.SEARCH_SHORT_SE:
+            assert "stopped short" in r.not_identifiable[key]
+            assert getattr(r, key).value is None
+        elif key not in r.not_identifiable:
+            assert getattr(r, key).value == before.value
+    for key, before, after in (("max_abs_g1", a.max_g1, a2.max_g1), ("max_abs_s", a.max_s, a2.max_s)):
+        moved = abs(after.value - before.value) / before.sd
+        if moved > quality.SEARCH_SHORT_SE:
+            assert "stopped short" in r.not_identifiable[key] or key in noise
+            assert getattr(r, key).value is None
+    if any(getattr(r, k).value is not None for k in ("droop", "max_abs_g1", "max_abs_s")):
+        assert any("stopped short of the minimum" in n for n in r.notes)
 
 
 def test_zur_at_12db_droop_and_bias_warning(excited, truth):
@@ -177,8 +197,17 @@ def test_zu_droop(truth, seed):
     # droop); one seed landing inside its interval is not a test (seed 0 missed by 0.002 pp)
     assert r.droop.ci95[0] < r.droop.value < r.droop.ci95[1]
     assert r.max_abs_s is None
-    lo, hi = r.peak_band_rad_s
-    assert lo < r.max_abs_g1.omega < hi
+    # max|G_1| carries Z_u's errors-in-variables bias (+14..+40 % at 12 dB, the process noise reaching u
+    # through the loop): shown with the bias bound in its interval, which then holds the truth, or null
+    # because that interval is wider than the value (analysis.quality.zu_eiv)
+    pk = r.max_abs_g1
+    if pk.value is None:
+        assert "errors-in-variables bias bound" in pk.reason
+    else:
+        lo, hi = r.peak_band_rad_s
+        assert lo < pk.omega < hi
+        assert pk.ci95[0] <= truth["max_g1"] <= pk.ci95[1]
+        assert any("errors-in-variables bias bound" in n for n in r.notes)
 
 
 @pytest.fixture(scope="module")

@@ -196,3 +196,144 @@ def test_short_low_snr_log_gives_a_null_droop_with_its_reason():
     assert r.max_abs_s is None and r.tso is None  # Z_u cannot give them: not withheld, just absent
     line = next(x for x in text_summary(r).splitlines() if x.startswith("effective droop"))
     assert r.droop.reason in line and "not identifiable: not identifiable" not in line
+
+
+# -- Z_ur's search stopped short: what one exact Newton step moves ------------------------------------
+
+def test_search_short_withholds_only_what_the_newton_step_moves():
+    rep = _report(method="zur")
+    sd_s = 0.05 / 1.959963984540054  # max|S| 1.3 [1.25, 1.35]: sd 0.0255
+    stepped = _report(
+        method="zur",
+        droop=ValueCI(value=0.08 + 0.0001, ci95=(0.079, 0.081)),  # 0.2 sd: kept
+        max_abs_s=PeakCI(value=1.3 + 0.6 * sd_s, omega=0.3, ci95=(1.25, 1.35)),  # 0.6 sd: withheld
+    )
+    stop = "Levenberg-Marquardt: maximum number of iterations (83) reached"
+    ni, note = quality.search_short(rep, stepped, stop)
+    assert set(ni) == {"max_abs_s"}
+    assert ni["max_abs_s"].startswith("Z_ur search stopped short of the minimum (Levenberg-Marquardt")
+    assert "moves max|S| from 1.3 to 1.32, 0.6 standard errors (more than 0.5)" in ni["max_abs_s"]
+    assert note is not None and "less than 0.5 standard errors" in note
+    out = quality.withhold(rep, ni)
+    assert out.max_abs_s.value is None and out.max_abs_s.reason == ni["max_abs_s"]
+    assert out.droop.value == 0.08 and out.max_abs_g1.value == 1.0
+    assert out.local is None  # eq. 9-10 and the margins come from the same S
+
+
+def test_search_short_uses_the_side_of_the_interval_the_step_goes_to():
+    # the droop's interval [7.0, 8.1] %: a step down by 0.1 pp is 0.18 sd of the lower side, kept; up by
+    # 0.1 pp is 1.96 sd of the upper side, withheld
+    rep = _report(method="zur", droop=ValueCI(value=0.08, ci95=(0.070, 0.081)))
+    down = _report(method="zur", droop=ValueCI(value=0.079, ci95=(0.070, 0.081)))
+    up = _report(method="zur", droop=ValueCI(value=0.081, ci95=(0.070, 0.081)))
+    assert "droop" not in quality.search_short(rep, down, "x")[0]
+    assert "droop" in quality.search_short(rep, up, "x")[0]
+    # a quantity the step lost (null after it) cannot be judged: withheld
+    gone = _report(method="zur", max_abs_g1=PeakCI(value=None, omega=None, ci95=(None, None)))
+    assert "max_abs_g1" in quality.search_short(rep, gone, "x")[0]
+
+
+def test_zur_process_noise_gates_by_the_noise_share_of_u():
+    noisy = lambda w: np.full(np.shape(w), 0.45)  # noqa: E731
+    quiet = lambda w: np.full(np.shape(w), 0.08)  # noqa: E731
+    # noisy over the whole band the fit rests on: every quantity of Z_ur
+    ni = quality.zur_process_noise(0.6, noisy)
+    assert set(ni) == set(quality.ZUR_QUANTITIES)
+    assert "paper Remark 7" in ni["max_abs_s"] and "it makes 0.45 of u" in ni["max_abs_s"]
+    assert "0.05-0.5 rad/s" in ni["droop"] and "biases Z_ur's fit" in ni["droop"]
+    assert quality.zur_process_noise(0.6, quiet) == {}
+    out = quality.withhold(_report(method="zur"), ni)
+    assert out.max_abs_s.value is None and out.gp is None and out.tso is None and out.local is None
+    assert out.droop.value is None and out.droop.reason == ni["droop"] and out.max_abs_g1.value is None
+
+    # noisy only near S's peak (above the band): S, G_p and TSO only
+    def near_s(w):
+        return np.where(np.asarray(w) > 0.5, 0.45, 0.08)
+
+    ni = quality.zur_process_noise(1.2, near_s, max_g1_omega=0.2)
+    assert set(ni) == {"max_abs_s", "gp", "tso"} and "0.6-1.2 rad/s" in ni["max_abs_s"]
+    assert "biases Z_ur's S" in ni["max_abs_s"]
+    # and near G_1's peak only: max|G_1|
+    ni = quality.zur_process_noise(0.2, near_s, max_g1_omega=1.2)
+    assert set(ni) == {"max_abs_g1"} and "biases Z_ur's G_1" in ni["max_abs_g1"]
+
+
+# -- Z_u's max|G_1|: the errors-in-variables bias bound ------------------------------------------------
+
+def _coh(g_ue: float, g_ur: float) -> dict:
+    return {"u-epsilon": lambda w: np.full(np.shape(w), g_ue),
+            "u-residual": lambda w: np.full(np.shape(w), g_ur)}
+
+
+def test_zu_eiv_widens_max_g1_by_the_bias_bound():
+    rep = _report(method="zu", max_abs_s=None, tso=None)  # max|G_1| 1.0 [0.95, 1.05] at 0.2 rad/s
+    out, ni, note = quality.zu_eiv(rep, _coh(0.8, 0.16), low_edge_omega=1e-3)
+    b = math.sqrt(0.2 / 0.8 * 0.16)  # 0.2: 20 % of the value
+    assert ni == {}
+    assert out.max_abs_g1.ci95 == pytest.approx((0.95 - b, 1.05 + b))
+    assert out.max_abs_g1.value == 1.0 and rep.max_abs_g1.ci95 == (0.95, 1.05)
+    assert "errors-in-variables bias bound" in note and "(20 %)" in note
+    # no feedback noise in u (residual uncorrelated with u): nothing to add
+    assert quality.zu_eiv(rep, _coh(0.8, 0.0), low_edge_omega=1e-3)[0].max_abs_g1.ci95 == pytest.approx(
+        (0.95, 1.05))
+
+
+def test_zu_eiv_withholds_a_bound_wider_than_the_value_and_a_max_at_the_low_edge():
+    rep = _report(method="zu", max_abs_s=None, tso=None)
+    _, ni, note = quality.zu_eiv(rep, _coh(0.6, 0.5), low_edge_omega=1e-3)  # bound 58 %
+    assert note is None
+    assert ni["max_abs_g1"].startswith(quality.NOT_IDENTIFIABLE)
+    assert "wider than the value" in ni["max_abs_g1"]
+    assert "u-ε coherence 0.60, u-residual coherence 0.50" in ni["max_abs_g1"]
+    assert quality.withhold(rep, ni).max_abs_g1.value is None
+    edge = _report(method="zu", max_abs_s=None, tso=None,
+                   max_abs_g1=PeakCI(value=0.08, omega=1e-3, ci95=(0.079, 0.081)))
+    _, ni, _ = quality.zu_eiv(edge, _coh(0.9, 0.0), low_edge_omega=1e-3 / 0.9)
+    assert "no resonance" in ni["max_abs_g1"]
+
+
+# -- G_p per TSO period ---------------------------------------------------------------------------------
+
+def _points(ci_at_10s=(0.3, 0.7)):
+    from fcrlive.analysis.report import PeriodValue
+
+    def pv(t, a, ci):
+        return PeriodValue(period_s=t, re=a, im=0.0, abs=a, phase_deg=0.0, abs_ci95=ci)
+
+    gp = [pv(10.0, 0.5, ci_at_10s), pv(60.0, 5.0, (4.8, 5.2)), pv(300.0, 10.0, (9.5, 10.5))]
+    f = [pv(10.0, 0.04, (0.016, 0.064)), pv(60.0, 0.4, (0.38, 0.42)), pv(300.0, 0.8, (0.76, 0.84))]
+    return gp, f
+
+
+def test_a_gp_point_wider_than_itself_is_null_with_its_reason_and_the_tso_verdict_undecided():
+    gp, f = _points(ci_at_10s=(0.0, 1.1))  # 0.5 in [0, 1.1]: wider than the value
+    rep = _report(gp=gp, f=f)
+    out = quality.withhold(rep)
+    p10 = out.gp[0]
+    assert p10.abs is None and p10.re is None and p10.phase_deg is None and p10.abs_ci95 == (None, None)
+    assert p10.reason.startswith(quality.NOT_IDENTIFIABLE) and "|G_p| at T = 10 s" in p10.reason
+    assert out.not_identifiable["gp_10s"] == p10.reason
+    assert out.f[0].abs is None and out.f[0].reason == p10.reason  # F at that period too
+    assert [p.abs for p in out.gp[1:]] == [5.0, 10.0] and [p.abs for p in out.f[1:]] == [0.4, 0.8]
+    v = out.tso["fcrn"]
+    assert v.verdict == "undecided" and v.passed  # the point verdict is kept, the decision is not
+    assert any("G_p at T = 10 s" in x and "not identifiable" in x for x in v.reasons)
+    assert rep.tso["fcrn"].verdict == "pass"  # the input report is not changed
+    assert "T = 10 s: not identifiable" in text_summary(out).replace("        ", "")
+
+
+def test_usable_gp_points_leave_the_report_alone():
+    gp, f = _points()
+    rep = _report(gp=gp, f=f)
+    assert quality.withhold(rep) is rep
+
+
+def test_search_short_nulls_only_the_gp_points_the_step_moved():
+    gp, f = _points()
+    rep = _report(method="zur", gp=gp, f=f)
+    moved = [p.model_copy(update={"abs": p.abs * (1.05 if p.period_s == 60.0 else 1.0)}) for p in gp]
+    ni, note = quality.search_short(rep, _report(method="zur", gp=moved), "x")
+    assert set(ni) == {"gp_60s"} and note is not None
+    out = quality.withhold(rep, ni)
+    assert out.gp[1].abs is None and out.gp[1].reason == ni["gp_60s"] and out.gp[0].abs == 0.5
+    assert out.tso["fcrn"].verdict == "undecided"

@@ -54,6 +54,7 @@ Methods
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -64,6 +65,7 @@ import scipy.signal as sps
 from fcrlive.analysis import controller as ctl_mod
 from fcrlive.errors import DataError
 from fcrlive.ident import FreqResp, IdData, IdentError, ResidResult, bj, oe, resid, xresid
+from fcrlive.ident.pem import newton_step
 from fcrlive.ident.poly import PolyModel
 from fcrlive.signals import PlantSignals, excitation_detected
 
@@ -271,6 +273,17 @@ class ExperimentResult:
     not_identifiable: dict[str, str] = field(default_factory=dict)
     """Report key ("max_abs_s", "max_abs_g1", "gp", "tso") → why the method cannot give it from this log
     (e.g. :func:`zcu_swing`'s delay check); carried to the report by assess and build_report."""
+    newton: Responses | None = None
+    """Z_ur whose search stopped short of the minimum: the responses after one exact Newton step from the
+    fit (:func:`fcrlive.ident.pem.newton_step`); how far each quantity moves with it, in its standard
+    errors, decides whether it is shown (:func:`fcrlive.analysis.quality.search_short`). None otherwise."""
+    coherence: dict[str, Callable[[np.ndarray], np.ndarray]] | None = None
+    """ω [rad/s] → magnitude-squared coherence (Welch, :func:`coherence_fn`) of two signals of the
+    identification data. "u-residual": u and the fit's residual, the share of u that the process noise
+    put there through the loop (the condition of the paper's Remark 7), Z_ur's gate of S
+    (:func:`fcrlive.analysis.quality.zur_process_noise`) and, with "u-epsilon", Z_u's errors-in-variables
+    bound of max|G_1| (:func:`fcrlive.analysis.quality.zu_eiv`). Z_ur also "r-epsilon" (the share of ε the
+    excitation explains, for studies). None for the other methods."""
 
     @property
     def omega_max(self) -> float:
@@ -881,8 +894,11 @@ def zur(
     Known limits (paper Remark 7, Section 7.3), measured on paper-plant1 (docs/identify.md): exact on
     noise-free data and within 1 % at 30 dB, but at 12 dB the process noise reaching the electric power
     through the loop without a delay biases S at low frequencies and puts its peak up to 25 % high at
-    twice the true frequency. Every result carries a warning saying so; Z_cu is the method to use when
-    ContOutSig and GuideVane can be logged. The output-error loop form y ← (ε, u) that Z_cu's success
+    twice the true frequency. Every result carries a warning saying so, and the report withholds what the
+    process noise's share of u says is biased (:func:`fcrlive.analysis.quality.zur_process_noise`, from
+    ``coherence["u-residual"]``); Z_cu is the method to use when ContOutSig and GuideVane can be logged.
+    A search that stopped short of the minimum gets one exact Newton step (``newton``, judged by
+    :func:`fcrlive.analysis.quality.search_short`). The output-error loop form y ← (ε, u) that Z_cu's success
     suggests fails here even on noise-free data: ε and u are nearly collinear at low frequencies
     (ε ≈ G_1 u), so G_J G_p and G_J are not separated.
     """
@@ -894,13 +910,29 @@ def zur(
     nb, nc, nd, nf = orders
     m = _fit("ε ← (u, r)", bj, d, [nb, nb], nc, nd, [nf, nf], [0, 0], **FIT)
 
-    def responses(omega) -> dict[str, FreqResp]:
-        w = np.atleast_1d(np.asarray(omega, float))
-        G_1 = m.freqresp(w, "u") * prep.u_delay(w)
-        S = m.freqresp(w, "r")
-        return {"G_1": G_1, "S": S, "G_p": (1.0 - S) / G_1, "G_J": G_1 / S}
+    def responses_of(mod: PolyModel) -> Responses:
+        def responses(omega) -> dict[str, FreqResp]:
+            w = np.atleast_1d(np.asarray(omega, float))
+            G_1 = mod.freqresp(w, "u") * prep.u_delay(w)
+            S = mod.freqresp(w, "r")
+            return {"G_1": G_1, "S": S, "G_p": (1.0 - S) / G_1, "G_J": G_1 / S}
 
+        return responses
+
+    responses = responses_of(m)
+    newton = None
+    if not m.report.converged:
+        # The search's Jacobian is not the exact one with ic="estimate" (ident.pem._IcProjection): it
+        # stopped short on 8 of 10 30-min logs of the paper's plant at 30 dB, 10 of 10 at 12 dB. One exact
+        # step from its end point shows which quantities that matters for (analysis.quality.search_short).
+        try:
+            newton = responses_of(newton_step(m, d, ic=FIT["ic"]).model)
+        except (IdentError, ValueError, np.linalg.LinAlgError):
+            newton = None
     val, warns = _validate({"ε ← (u, r)": (m, d)})
+    coh = {"r-epsilon": coherence_fn(prep.signals["r"], prep.signals["epsilon"], prep.Ts)}
+    with contextlib.suppress(IdentError, ValueError):
+        coh["u-residual"] = coherence_fn(d.u[:, 0], m.residuals(d), prep.Ts)
     warns.append(
         "Z_ur is biased when process noise reaches the electric power (paper Remark 7): on the paper's "
         "plant at 12 dB max|S| came out up to 25 % high and the intervals of S and G_p do not cover that "
@@ -908,8 +940,30 @@ def zur(
     )
     return ExperimentResult(
         "zur", prep.Ts, d.N, prep.duration_s, {"epsilon<-(u,r)": m}, responses, ("G_1", "S", "G_p"), None,
-        val, tuple(warns), (),
+        val, tuple(warns), (), newton, coh,
     )
+
+
+COHERENCE_WINDOW_S = 256.0
+"""Welch window [s] of the coherences of Z_ur and Z_u (:func:`coherence_fn`): 0.025 rad/s bins, 7 windows
+in 15 min (14 with the half overlap)."""
+
+
+def coherence_fn(
+    a: np.ndarray, b: np.ndarray, Ts: float, nperseg: int | None = None
+) -> Callable[[np.ndarray], np.ndarray]:
+    """ω → magnitude-squared coherence of ``a`` and ``b`` (Welch over the concatenated decimated segments,
+    Hann windows of ``nperseg`` samples, default :data:`COHERENCE_WINDOW_S`), linearly interpolated between
+    the bins. The residuals in it are from rest per record: their start transient is a small share of a
+    15-30 min log."""
+    nper = int(min(nperseg or round(COHERENCE_WINDOW_S / Ts), a.size))
+    f, c = sps.coherence(a, b, fs=1.0 / Ts, nperseg=nper)
+    w_bins = 2.0 * np.pi * f
+
+    def coherence(omega) -> np.ndarray:
+        return np.interp(np.atleast_1d(np.asarray(omega, float)), w_bins, c)
+
+    return coherence
 
 
 ZU_TS_MIN = 1.0
@@ -978,9 +1032,15 @@ def zu(
 
     val, warns = _validate({"ε ← u": (m, d)})
     warns.append("no excitation: S and G_p cannot be identified from this log (paper Section 6.3)")
+    u = d.u[:, 0]
+    try:
+        coh = {"u-epsilon": coherence_fn(u, d.y, prep.Ts),
+               "u-residual": coherence_fn(u, m.residuals(d), prep.Ts)}
+    except (IdentError, ValueError):
+        coh = None
     return ExperimentResult(
         "zu", prep.Ts, d.N, prep.duration_s, {"epsilon<-u": m}, responses, ("G_1",), None, val, tuple(warns),
-        tuple(notes),
+        tuple(notes), None, coh,
     )
 
 

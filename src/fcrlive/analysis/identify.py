@@ -31,7 +31,7 @@ import numpy as np
 from fcrlive.analysis import experiments as ex
 from fcrlive.analysis import lowband as lb
 from fcrlive.analysis import quality
-from fcrlive.analysis.assess import PEAK_MIN_PERIOD_S, Assessment, assess, peak_band
+from fcrlive.analysis.assess import OMEGA_MIN, PEAK_MIN_PERIOD_S, Assessment, assess, peak_band
 from fcrlive.analysis.controller import ControllerFitError
 from fcrlive.analysis.report import IdentifyReport, build_report
 from fcrlive.constants import F0_HZ
@@ -165,19 +165,41 @@ def identify_full(
         signals, rated_mw=rated_mw, f0=f0, kd=kd, plant=plant, method=method, ts_id=ts_id, t_fme_s=t_fme_s,
         peak_min_period_s=peak_min_period_s, h=h,
     )
-    return replace(res, report=quality.withhold(res.report, _not_identifiable(res)))
+    ni, note = _not_identifiable(res, kd=kd, t_fme_s=t_fme_s, peak_min_period_s=peak_min_period_s)
+    rep = res.report
+    if rep.method == "zu":
+        # the errors-in-variables bound of Z_u's max|G_1| (quality.zu_eiv), before the width rule
+        rep, ni_eiv, note = quality.zu_eiv(rep, res.experiment.coherence,
+                                           low_edge_omega=OMEGA_MIN / PEAK_EDGE_FRACTION)
+        ni.update(ni_eiv)
+    if note:
+        rep = rep.model_copy(update={"notes": [*rep.notes, note]})
+    return replace(res, report=quality.withhold(rep, ni))
 
 
-def _not_identifiable(res: Identification) -> dict[str, str]:
-    """Quantities the method itself says it cannot give (beyond the width rule): all of Z_ur when its
-    search did not converge; the droop of the sine tests (the setting, not a measurement)."""
+def _not_identifiable(res: Identification, *, kd: float = 0.0, t_fme_s: float | None = None,
+                      peak_min_period_s: float = PEAK_MIN_PERIOD_S) -> tuple[dict[str, str], str | None]:
+    """Quantities the method itself says it cannot give (beyond the width rule), and a note: of a Z_ur
+    search that stopped short of the minimum, those one exact Newton step moves by more than half a
+    standard error (quality.search_short; all of Z_ur when the step could not be made); the droop of the
+    sine tests (the setting, not a measurement)."""
     rep, exp = res.report, res.experiment
     if rep.method == "zur":
         fit = exp.models["epsilon<-(u,r)"].report
-        return quality.zur_not_converged(fit.converged, fit.stop_reason)
+        noise = quality.zur_process_noise(rep.max_abs_s.omega if rep.max_abs_s else None,
+                                          (exp.coherence or {}).get("u-residual"),
+                                          max_g1_omega=rep.max_abs_g1.omega if rep.max_abs_g1 else None)
+        if fit.converged or exp.newton is None:
+            return {**noise, **quality.zur_not_converged(fit.converged, fit.stop_reason)}, None
+        a2 = assess(replace(exp, responses=exp.newton), kd=kd, t_fme_s=t_fme_s,
+                    peak_min_period_s=peak_min_period_s, products=())
+        stepped = build_report(a2, method_reason="", samples=exp.n_samples, duration_s=exp.duration_s,
+                               rated_mw=rep.rated_mw, f0=rep.f0_hz)
+        short, note = quality.search_short(rep, stepped, fit.stop_reason)
+        return {**noise, **short}, note
     if rep.method == "sine" and rep.droop is not None and rep.droop.value is not None:
-        return {"droop": quality.SINE_DROOP.format(droop=100.0 * rep.droop.value)}
-    return {}
+        return {"droop": quality.SINE_DROOP.format(droop=100.0 * rep.droop.value)}, None
+    return {}, None
 
 
 def _identify(

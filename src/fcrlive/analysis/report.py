@@ -42,12 +42,17 @@ class PeakCI(ValueCI):
 
 
 class PeriodValue(BaseModel):
+    """A response at one TSO period; null (re, im, abs, phase_deg and abs_ci95 null) with ``reason`` where
+    it is not identifiable from the log (analysis.quality: its interval is too wide, key ``gp_<T>s`` in
+    ``not_identifiable``)."""
+
     period_s: float
-    re: float
-    im: float
-    abs: float
-    phase_deg: float
+    re: float | None
+    im: float | None
+    abs: float | None
+    phase_deg: float | None
     abs_ci95: Bounds
+    reason: str | None = Field(default=None, description="why the value is null (not identifiable)")
 
 
 class TsoProduct(BaseModel):
@@ -374,12 +379,20 @@ def text_summary(r: IdentifyReport) -> str:
         fmap = {p.period_s: p for p in (r.f or [])}
         for p in r.gp:
             fp = fmap.get(p.period_s)
+            if p.abs is None:
+                lines.append(f"{p.period_s:7.0f} {'-':>10} {'-':>10} {'-':>8} {'not identifiable':>22}")
+                continue
             lo, hi = p.abs_ci95
             band = "unknown" if lo is None or hi is None else f"[{lo:.3f}, {hi:.3f}]"
+            f_abs = fp.abs if fp is not None and fp.abs is not None else float("nan")
             lines.append(
-                f"{p.period_s:7.0f} {p.abs:10.3f} {p.phase_deg:10.1f} "
-                f"{(fp.abs if fp else float('nan')):8.3f} {band:>22}"
+                f"{p.period_s:7.0f} {p.abs:10.3f} {p.phase_deg:10.1f} {f_abs:8.3f} {band:>22}"
             )
+        nulled = [p for p in r.gp if p.abs is None]
+        if nulled:
+            lines.append(f"        T = {', '.join(f'{p.period_s:g}' for p in nulled)} s: {nulled[0].reason}"
+                         if len({p.reason for p in nulled}) == 1 else
+                         "        " + "; ".join(f"T = {p.period_s:g} s: {p.reason}" for p in nulled))
     if r.tso:
         lines += ["", "TSO requirements (Req. 8 stability, Req. 9 performance):"]
         for k, v in r.tso.items():
