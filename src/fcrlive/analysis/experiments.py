@@ -940,7 +940,7 @@ def zur(
     )
     return ExperimentResult(
         "zur", prep.Ts, d.N, prep.duration_s, {"epsilon<-(u,r)": m}, responses, ("G_1", "S", "G_p"), None,
-        val, tuple(warns), (), newton, coh,
+        val, tuple(warns), (), newton=newton, coherence=coh,
     )
 
 
@@ -1040,7 +1040,7 @@ def zu(
         coh = None
     return ExperimentResult(
         "zu", prep.Ts, d.N, prep.duration_s, {"epsilon<-u": m}, responses, ("G_1",), None, val, tuple(warns),
-        tuple(notes), None, coh,
+        tuple(notes), coherence=coh,
     )
 
 
