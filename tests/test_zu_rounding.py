@@ -7,9 +7,8 @@ Measured before (one BLAS thread): Z_u, 10 min at 12 dB, seed 7: droop 7.98 % as
 simulation's BLAS threads (logs differing by 1.5e-15). Two causes, both fixed: the decimation filter as one
 transfer function amplified the rounding of the log 1e9-fold at q = 50 (experiments._decimator, now
 second-order sections), and the search's Jacobian left out Kaufman's term of the initial-state projection,
-so searches stalled short of the minimum where the rounding put them (pem._IcProjection.kaufman). Z_ur is
-now the same to 1e-14. Z_u still moves by ~2 % of its interval's half-width (7.978 / 7.977 / 7.990 %: far
-inside the interval, but above this test's 0.1 %): xfail until its multistart settles.
+so searches stalled short of the minimum where the rounding put them (pem._IcProjection.kaufman). Both are
+now the same to 1e-14 (Z_u moved by 2 % of its half-width while it ran 8 perturbed restarts per order).
 """
 
 from __future__ import annotations
@@ -17,7 +16,6 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-import pytest
 
 from fcrlive.analysis.identify import identify_full
 from fcrlive.plant.params import preset
@@ -51,7 +49,6 @@ def _same_to_rounding(droops) -> None:
         assert abs(v - v0) <= 1e-3 * half, [round(100 * x[0], 3) for x in droops]
 
 
-@pytest.mark.xfail(strict=False, reason="Z_u moves by ~2 % of its half-width with 1e-13 of the data")
 def test_zu_droop_does_not_depend_on_rounding():
     res = simulate(PLANT, SimConfig(duration_s=600.0, snr_db=12.0, excitation=False, seed=7))
     sig = plant_signals(log_from_sim(res), rated_mw=300.0)
