@@ -494,8 +494,16 @@ def zcu(
     ts_id: float = DEFAULT_TS_ID,
     prep: Prepared | None = None,
     orders: tuple[Sequence[int], Sequence[int]] = ((2, 1), (2, 1)),
+    jackknife: bool = True,
 ) -> ExperimentResult:
-    """Z_cu with Z_ca (Section 4.2.2, eq. 17-19; module docstring). Needs c and a."""
+    """Z_cu with Z_ca (Section 4.2.2, eq. 17-19; module docstring). Needs c and a.
+
+    With ``jackknife`` (default) the sd of |S|, |G_1| and |G_p| at every ω is the larger of the
+    covariance's and a leave-one-block-out jackknife's of the loop model y ← (c, u)
+    (:func:`_loop_jackknife`, as :func:`zcu_swing` does for G_jp). Over 20 30-min records of paper-plant1
+    at 12 dB (`bench identify --coverage 20`, seeds 1000-1019) the covariance alone covered the droop on
+    17, max|G_1| on 17 and max|S| on 13; with the jackknife 20, 19 and 17. The droop's 95 % half-width
+    went from 0.0025 to 0.021 percentage points (seeds 1000-1007), the errors are unchanged."""
     if signals.c is None or signals.a is None:
         raise DataError("zcu needs ContOutSig and GuideVane (controller output and gate position)")
     prep = prep or prepare(signals, ts_id=ts_id)
@@ -514,6 +522,7 @@ def zcu(
     d_ca = prep.iddata("a", ("c",))
     m_ca = _fit("a ← c", oe, d_ca, 2, 1, 0, **FIT)
     ctl = controller
+    jk = _loop_jackknife(d_cu, m_cu) if jackknife else []
 
     def responses(omega) -> dict[str, FreqResp]:
         w = np.atleast_1d(np.asarray(omega, float))
@@ -529,8 +538,26 @@ def zcu(
             C = FreqResp.known(w, ctl.G_c(w)) / (1.0 + L_d)
         G_p = G_jp * C / G_J
         S = 1.0 / (1.0 + G_p * G_J)
-        return {"G_1": G_J * S, "S": S, "G_p": G_p, "G_J": G_J, "G_jp": G_jp, "G_s": G_s}
+        out = {"G_1": G_J * S, "S": S, "G_p": G_p, "G_J": G_J, "G_jp": G_jp, "G_s": G_s}
+        if len(jk) >= JACKKNIFE_MIN_FITS:
+            # as in zcu_swing, with both paths of the loop model refitted (G_J too is estimated here), and
+            # at every ω: G_1(0), i.e. the droop, comes from the same two-input fit
+            delay = prep.u_delay(w).value
+            loops = [_loop_values(mk.freqresp(w, "c").value, C.value, -mk.freqresp(w, "u").value * delay)
+                     for mk in jk]
+            for key in ("S", "G_1", "G_p"):
+                a = np.abs(np.array([lp[key] for lp in loops]))
+                n = a.shape[0]
+                sd = np.sqrt((n - 1.0) / n * np.sum((a - a.mean(axis=0)) ** 2, axis=0))
+                out[key] = _widened(out[key], JACKKNIFE_T_FACTOR * sd)
+        return out
 
+    if jackknife and len(jk) >= JACKKNIFE_MIN_FITS:
+        notes.append(f"intervals of S, G_1 (the droop too) and G_p: the larger of the covariance's and a "
+                     f"{len(jk)}-block jackknife of the loop model y ← (c, u)")
+    elif jackknife:
+        notes.append(f"jackknife of the loop model not possible ({len(jk)} of {JACKKNIFE_BLOCKS} refits "
+                     "succeeded): intervals from the covariance alone")
     r_val = prep.signals.get("r") if excitation_detected(signals) else None
     val, warns = _validate({"y ← (c, u)": (m_cu, d_cu), "a ← c": (m_ca, d_ca)}, r_val)
     warns = ctl_warn + warns
@@ -804,6 +831,23 @@ def _pulled_in(m: PolyModel, nk: int | None = None) -> PolyModel:
     if nk is not None and nk != m.nk[0]:
         b = np.concatenate((np.zeros(nk), b[m.nk[0]:]))
     return replace(m, f=(f,), b=(b,), nk=(nk if nk is not None else m.nk[0],), covariance=None)
+
+
+def _loop_jackknife(d: IdData, m: PolyModel) -> list[PolyModel]:
+    """Z_cu's two-input loop model y ← (c, u) refitted with each of :data:`JACKKNIFE_BLOCKS` contiguous
+    blocks of ``d`` left out, each from the full fit (:data:`JACKKNIFE_MAXITER` iterations)."""
+    edges = np.linspace(0, d.N, JACKKNIFE_BLOCKS + 1).astype(int)
+    out = []
+    for a, b in itertools.pairwise(edges):
+        keep = np.ones(d.N, bool)
+        keep[a:b] = False
+        try:
+            dk = d.split(keep, min_length=50)
+            out.append(oe(dk, list(m.nb), list(m.nf), list(m.nk), init=m, multistart=False,
+                          maxiter=JACKKNIFE_MAXITER, ic="estimate", covariance="gauss"))
+        except (IdentError, ValueError, np.linalg.LinAlgError):
+            continue
+    return out
 
 
 def _swing_jackknife(d: IdData, m: PolyModel) -> list[PolyModel]:
