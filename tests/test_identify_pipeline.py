@@ -258,8 +258,9 @@ def test_too_short_is_a_data_error(excited):
 
 @pytest.mark.slow
 def test_zcu_coverage_20_seeds(truth):
-    """Empirical coverage of Z_cu's 95 % intervals over 20 seeds (measured: droop 0.85, max|G_1| 0.90,
-    max|S| 0.70; the droop misses are by ≤ 0.03 % of the droop). Accuracy must hold on every seed."""
+    """Empirical coverage of Z_cu's 95 % intervals over 20 seeds (measured with the jackknife of the loop
+    model: droop 1.00, max|G_1| 0.95, max|S| 0.85; the covariance alone gave 0.85, 0.85-0.90, 0.65-0.70).
+    Accuracy must hold on every seed."""
     hits = {"droop": 0, "max_g1": 0, "max_s": 0}
     n = 20
     for seed in range(1000, 1000 + n):
@@ -271,9 +272,9 @@ def test_zcu_coverage_20_seeds(truth):
             assert abs(v.value / truth[key] - 1) <= tol, (seed, key, v.value)
             hits[key] += v.ci95[0] <= truth[key] <= v.ci95[1]
     print({k: h / n for k, h in hits.items()})
-    assert hits["droop"] / n >= 0.8
-    assert hits["max_g1"] / n >= 0.8
-    assert hits["max_s"] / n >= 0.65
+    assert hits["droop"] / n >= 0.9
+    assert hits["max_g1"] / n >= 0.85
+    assert hits["max_s"] / n >= 0.75
 
 
 def test_peak_band_in_report(zcu_run, truth):

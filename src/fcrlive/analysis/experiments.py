@@ -454,7 +454,7 @@ def _loop_output_error(
     prep: Prepared, x: str, nb: Sequence[int], nf: Sequence[int]
 ) -> tuple[PolyModel, IdData]:
     d = prep.iddata("y", (x, "u"))
-    m = _fit(f"y ← ({x}, u)", oe, d, list(nb), list(nf), [1, 0], **FIT)
+    m = _fit(f"y ← ({x}, u)", oe, d, list(nb), list(nf), [1, 0], multistart=True, **FIT)
     if nf[1] == 1 and not _physical(m):
         # Both paths are low-passes: the swing pole of G_J = 1/(2Hs + Kd) is real and POSITIVE, G_jp's poles
         # are those of the turbine and the swing. A fit with a pole on the negative axis (an oscillation at
