@@ -495,19 +495,14 @@ def _final_verdict(st: _Struct, th: np.ndarray, eps: np.ndarray, aux, segs, V: f
     """Converged to statistical accuracy (:data:`STAT_TOL`): the Gauss-Newton predicted decrease at θ.
 
     Returns the verdict and J at θ (``J`` when given, computed otherwise; None if that failed)."""
-    n = eps.shape[0]
     if not (np.isfinite(V) and V > 0):
         return False, J
-    try:
-        if J is None:
+    if J is None:
+        try:
             J = _jacobian(st, segs, aux)
-        delta = _gn_step(J, eps)
-    except (np.linalg.LinAlgError, ValueError):
-        return False, J
-    if not np.all(np.isfinite(delta)):
-        return False, J
-    pred = float(np.sum((J @ delta) ** 2))
-    return pred <= STAT_TOL * V / n, J
+        except (np.linalg.LinAlgError, ValueError):
+            return False, None
+    return _predicted(J, eps) <= STAT_TOL * V / eps.shape[0], J
 
 
 def _search(st: _Struct, th0: np.ndarray, segs, maxiter: int = 100, tol: float = 1e-10) -> _SearchResult:
@@ -911,12 +906,7 @@ def _from_init(st: _Struct, init: PolyModel) -> np.ndarray:
     return st.pack(B, F, C, D)
 
 
-N_PERTURBED = 3
-"""Restarts near the best end point so far (:func:`_perturbed`) when the multistart runs; an integer
-``multistart`` runs every start with that many of them."""
-
-
-def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, multistart: bool | str | int,
+def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, multistart: bool | str,
          n_high: int | None, maxiter: int, tol: float, seed: int, covariance: str = "gauss") -> PolyModel:
     if covariance not in ("gauss", "sandwich"):
         raise ValueError(f"covariance = {covariance!r}: use 'gauss' or 'sandwich'")
@@ -1009,12 +999,10 @@ def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, mult
         # seeds 0-19 (15 min) and Z_ur's as they were, and held seed 0 under either arithmetic.
         lazy.remove(shorter)
         run(shorter())
-    every = multistart is True or (isinstance(multistart, int) and not isinstance(multistart, bool))
-    if every or (multistart == "auto" and stalled(best)):
+    if multistart is True or (multistart == "auto" and stalled(best)):
         rng = np.random.default_rng(seed)
-        n_pert = N_PERTURBED if isinstance(multistart, (bool, str)) else int(multistart)
         extra = [lambda: _real_roots(st, best.theta), *lazy,
-                 *(lambda: _perturbed(st, best.theta, rng) for _ in range(n_pert))]
+                 *(lambda: _perturbed(st, best.theta, rng) for _ in range(3))]
         for make in extra:
             run(make())
             if multistart == "auto" and not stalled(best) and len(results) >= 2:
@@ -1154,7 +1142,7 @@ def _sandwich(J: np.ndarray, eps: np.ndarray, bounds) -> np.ndarray:
 
 
 def bj(data: IdData, nb: int | Sequence[int], nc: int, nd: int, nf: int | Sequence[int],
-       nk: int | Sequence[int] = 1, *, init: PolyModel | None = None, multistart: bool | str | int = "auto",
+       nk: int | Sequence[int] = 1, *, init: PolyModel | None = None, multistart: bool | str = "auto",
        n_high: int | None = None, maxiter: int = 100, tol: float = 1e-10, seed: int = 0,
        ic: str = "zero", covariance: str = "gauss") -> PolyModel:
     """Box-Jenkins model y = Σ B_i/F_i u_i + C/D e by prediction-error minimisation.
@@ -1166,7 +1154,7 @@ def bj(data: IdData, nb: int | Sequence[int], nc: int, nd: int, nf: int | Sequen
         init: initial model (same orders, A = 1); roots outside the unit circle are reflected inside.
         multistart: "auto" (restart when the first search stalls; BJ also always tries the start
             from a shorter ARX when the high-order one has more than 8 poles), True (always try every
-            start), an int n (every start, with n perturbed restarts instead of 3), False (one start).
+            start), False (one start).
         n_high: order of the high-order ARX used for initial values (default from N, at most 30).
         maxiter, tol: iteration limit and relative loss tolerance of the search.
         seed: seed of the perturbed restarts (the result is deterministic for a given seed).
@@ -1186,7 +1174,7 @@ def bj(data: IdData, nb: int | Sequence[int], nc: int, nd: int, nf: int | Sequen
 
 
 def oe(data: IdData, nb: int | Sequence[int], nf: int | Sequence[int], nk: int | Sequence[int] = 1, *,
-       init: PolyModel | None = None, multistart: bool | str | int = "auto", n_high: int | None = None,
+       init: PolyModel | None = None, multistart: bool | str = "auto", n_high: int | None = None,
        maxiter: int = 100, tol: float = 1e-10, seed: int = 0, ic: str = "zero",
        covariance: str = "gauss") -> PolyModel:
     """Output-error model y = Σ B_i/F_i u_i + e (a BJ model with C = D = 1). Arguments as :func:`bj`.
@@ -1216,38 +1204,27 @@ class NewtonStep:
     """N·(V_before − V_quadratic model's minimum)/V_before: the likelihood-ratio gain the step promised."""
 
 
-NEWTON_FD_STEP = 1e-6
-"""Relative step of the central differences of the exact Jacobian in :func:`newton_step`."""
-
-
 def newton_step(model: PolyModel, data: IdData, *, ic: str = "zero") -> NewtonStep:
     """One Gauss-Newton step from ``model`` on ``data`` with the EXACT Jacobian of the prediction errors.
 
-    Why: with ``ic="estimate"`` the search's Jacobian P⊥J treats the basis of the initial responses as
-    fixed (:class:`_IcProjection`): its gradient is 1.5-5 % off, and a search can stop ("no descent",
-    iteration limit) short of the minimum. Here ∂ε/∂θ is taken by central differences of ε itself (the
-    projection included), so Jᵀε is the gradient of the loss the search minimises and JᵀJ its Gauss-Newton
-    Hessian. The step is the minimum-norm least-squares solution on the identifiable subspace
+    Why: a search can stop (iteration limit, a root held at the stability guard) short of the minimum.
+    J is the search's own, exact with the projection of the initial responses included
+    (:meth:`_IcProjection.kaufman`; central differences of ε agreed to 1e-10),
+    so Jᵀε is the gradient of the loss the search minimises and JᵀJ its Gauss-Newton Hessian. The step is
+    the minimum-norm least-squares solution on the identifiable subspace
     (:data:`RANK_RTOL`; along J v ≈ 0 no transfer function changes), halved (at most 10 times) until it
     keeps every root inside the unit circle and lowers the loss. How far the step moves a quantity, in
     its standard errors, tells how much of the search's stop short of the minimum matters
-    (:mod:`fcrlive.analysis.quality`). ``ic`` as in :func:`bj` (the fit's own choice). Cost: 2p + 1
-    evaluations of ε (p parameters)."""
+    (:mod:`fcrlive.analysis.quality`). ``ic`` as in :func:`bj` (the fit's own choice)."""
     if model.na != 0:
         raise OrderError(f"model has na = {model.na}; OE/BJ models have A = 1")
     st = _check_orders(data, list(model.nb), model.nc, model.nd, list(model.nf), list(model.nk), "bj", ic)
     th0 = st.pack(list(model.b), list(model.f), model.c, model.d)
     segs = list(data.segments())
     n = data.N
-    eps0, _ = _residuals(st, th0, segs)
+    eps0, aux0 = _residuals(st, th0, segs)
     V0 = float(eps0 @ eps0)
-    J = np.empty((n, st.p), order="F")
-    for k in range(st.p):
-        h = NEWTON_FD_STEP * max(1.0, abs(th0[k]))
-        tp, tm = th0.copy(), th0.copy()
-        tp[k] += h
-        tm[k] -= h
-        J[:, k] = (_residuals(st, tp, segs)[0] - _residuals(st, tm, segs)[0]) / (2.0 * h)
+    J = _jacobian(st, segs, aux0)
     L = _cov_factor(J)
     delta = -(L @ (L.T @ (J.T @ eps0)))
     pred = float(np.sum((J @ delta) ** 2))
