@@ -22,6 +22,18 @@ def log_grid(omega_min: float, omega_max: float, n: int) -> np.ndarray:
     return np.geomspace(omega_min, omega_max, n)
 
 
+def _grid_best(fun: Callable[[np.ndarray], np.ndarray], w: np.ndarray, vals: np.ndarray | None
+               ) -> tuple[float, float, float, float] | None:
+    """(value, ω, lower neighbour, upper neighbour) of the finite grid minimum of ``fun`` on ``w``
+    (``vals`` = ``fun(w)`` when the caller has it); None when no value is finite."""
+    vals = np.asarray(fun(w) if vals is None else vals, dtype=float)
+    ok = np.isfinite(vals)
+    if not ok.any():
+        return None
+    i = int(np.argmin(np.where(ok, vals, np.inf)))
+    return float(vals[i]), float(w[i]), float(w[max(i - 1, 0)]), float(w[min(i + 1, w.size - 1)])
+
+
 def refined_min(fun: Callable[[np.ndarray], np.ndarray], w: np.ndarray, vals: np.ndarray | None = None,
                 *, xatol: float = 1e-7) -> tuple[float, float]:
     """``(min value, ω [rad/s])`` of ``fun`` (vectorised over ω) on the grid ``w``, refined between the
@@ -29,13 +41,10 @@ def refined_min(fun: Callable[[np.ndarray], np.ndarray], w: np.ndarray, vals: np
     ignored; ``(nan, nan)`` when none is finite."""
     from scipy.optimize import minimize_scalar  # lazily: importing the plant model stays light
 
-    vals = np.asarray(fun(w) if vals is None else vals, dtype=float)
-    ok = np.isfinite(vals)
-    if not ok.any():
+    start = _grid_best(fun, w, vals)
+    if start is None:
         return float("nan"), float("nan")
-    i = int(np.argmin(np.where(ok, vals, np.inf)))
-    best_v, best_w = float(vals[i]), float(w[i])
-    lo, hi = w[max(i - 1, 0)], w[min(i + 1, w.size - 1)]
+    best_v, best_w, lo, hi = start
     if hi > lo:
         res = minimize_scalar(
             lambda lx: float(np.asarray(fun(np.array([np.exp(lx)])), dtype=float).ravel()[0]),
@@ -66,13 +75,10 @@ def refined_min_grid(fun: Callable[[np.ndarray], np.ndarray], w: np.ndarray, val
     ``xatol``). Never worse than the grid's best; a grid between the neighbours also finds the lower of
     two minima there, where Brent may not. ``(nan, nan)`` when no value is finite.
     """
-    vals = np.asarray(fun(w) if vals is None else vals, dtype=float)
-    ok = np.isfinite(vals)
-    if not ok.any():
+    start = _grid_best(fun, w, vals)
+    if start is None:
         return float("nan"), float("nan")
-    i = int(np.argmin(np.where(ok, vals, np.inf)))
-    best_v, best_w = float(vals[i]), float(w[i])
-    lo, hi = float(w[max(i - 1, 0)]), float(w[min(i + 1, w.size - 1)])
+    best_v, best_w, lo, hi = start
     for _ in range(rounds):
         if not hi > lo:
             break

@@ -546,10 +546,7 @@ def zcu(
             loops = [_loop_values(mk.freqresp(w, "c").value, C.value, -mk.freqresp(w, "u").value * delay)
                      for mk in jk]
             for key in ("S", "G_1", "G_p"):
-                a = np.abs(np.array([lp[key] for lp in loops]))
-                n = a.shape[0]
-                sd = np.sqrt((n - 1.0) / n * np.sum((a - a.mean(axis=0)) ** 2, axis=0))
-                out[key] = _widened(out[key], JACKKNIFE_T_FACTOR * sd)
+                out[key] = _widened(out[key], _jackknife_sd(np.abs(np.array([lp[key] for lp in loops]))))
         return out
 
     if jackknife and len(jk) >= JACKKNIFE_MIN_FITS:
@@ -745,10 +742,8 @@ def zcu_swing(
             # the loop quantities of every leave-one-block-out G_jp (values only: the same C and G_J)
             loops = [_loop_values(m.freqresp(w, 0).value, C.value, G_J.value) for m in jk]
             for key in ("S", "G_1", "G_p"):
-                a = np.abs(np.array([lp[key] for lp in loops]))
-                n = a.shape[0]
-                sd = np.sqrt((n - 1.0) / n * np.sum((a - a.mean(axis=0)) ** 2, axis=0))
-                out[key] = _widened(out[key], fade * JACKKNIFE_T_FACTOR * sd)
+                sd = _jackknife_sd(np.abs(np.array([lp[key] for lp in loops])))
+                out[key] = _widened(out[key], fade * sd)
         return out
 
     r_val = prep.signals.get("r")
@@ -769,7 +764,7 @@ def zcu_swing(
 
 
 JACKKNIFE_BLOCKS = 6
-"""Contiguous blocks of the decimated data left out in turn by :func:`_swing_jackknife`."""
+"""Contiguous blocks of the decimated data left out in turn by :func:`_block_jackknife`."""
 JACKKNIFE_MIN_FITS = 4
 """Fewest successful leave-one-block-out refits for a jackknife sd (fewer: the covariance alone)."""
 JACKKNIFE_MAXITER = 30
@@ -833,63 +828,54 @@ def _pulled_in(m: PolyModel, nk: int | None = None) -> PolyModel:
     return replace(m, f=(f,), b=(b,), nk=(nk if nk is not None else m.nk[0],), covariance=None)
 
 
-def _bj_jackknife(d: IdData, m: PolyModel) -> list[PolyModel]:
-    """A Box-Jenkins model refitted with each of :data:`JACKKNIFE_BLOCKS` contiguous blocks of ``d`` left
-    out, each from the full fit (:data:`JACKKNIFE_MAXITER` iterations)."""
+def _block_jackknife(d: IdData, refit: Callable[[IdData], PolyModel]) -> list[PolyModel]:
+    """``refit`` of ``d`` with each of :data:`JACKKNIFE_BLOCKS` contiguous blocks left out (the refits that
+    fail are left out).
+
+    Why: on the zoo (30-min excited logs at the controller rate) the sandwich covariance plus
+    :func:`model_error` covered max|S| in 64 % of the runs, max|G_1| 87 %, G_p 86 %: the residuals of a
+    decimated closed loop are neither white nor independent of the past input, which a covariance formula
+    assumes away and a jackknife does not. The sd is taken per ω (:func:`_jackknife_sd`), which also gives
+    the peaks': the jackknife sd of each refit's own maximum was the same or smaller (within 1 %, or
+    0.3-0.8× on B, F, C ideal) on 7 zoo logs, as the envelope theorem says."""
     edges = np.linspace(0, d.N, JACKKNIFE_BLOCKS + 1).astype(int)
     out = []
     for a, b in itertools.pairwise(edges):
         keep = np.ones(d.N, bool)
         keep[a:b] = False
         try:
-            dk = d.split(keep, min_length=50)
-            out.append(bj(dk, list(m.nb), len(m.c) - 1, len(m.d) - 1, list(m.nf), list(m.nk), init=m,
-                          multistart=False, maxiter=JACKKNIFE_MAXITER, ic="estimate", covariance="gauss"))
+            out.append(refit(d.split(keep, min_length=50)))
         except (IdentError, ValueError, np.linalg.LinAlgError):
             continue
     return out
+
+
+# every refit starts from the full fit and runs at most JACKKNIFE_MAXITER iterations
+_JK_FIT = {"multistart": False, "maxiter": JACKKNIFE_MAXITER, "ic": "estimate", "covariance": "gauss"}
+
+
+def _bj_jackknife(d: IdData, m: PolyModel) -> list[PolyModel]:
+    """:func:`_block_jackknife` of a Box-Jenkins model (Z_u)."""
+    return _block_jackknife(d, lambda dk: bj(dk, list(m.nb), len(m.c) - 1, len(m.d) - 1, list(m.nf),
+                                             list(m.nk), init=m, **_JK_FIT))
 
 
 def _loop_jackknife(d: IdData, m: PolyModel) -> list[PolyModel]:
-    """Z_cu's two-input loop model y ← (c, u) refitted with each of :data:`JACKKNIFE_BLOCKS` contiguous
-    blocks of ``d`` left out, each from the full fit (:data:`JACKKNIFE_MAXITER` iterations)."""
-    edges = np.linspace(0, d.N, JACKKNIFE_BLOCKS + 1).astype(int)
-    out = []
-    for a, b in itertools.pairwise(edges):
-        keep = np.ones(d.N, bool)
-        keep[a:b] = False
-        try:
-            dk = d.split(keep, min_length=50)
-            out.append(oe(dk, list(m.nb), list(m.nf), list(m.nk), init=m, multistart=False,
-                          maxiter=JACKKNIFE_MAXITER, ic="estimate", covariance="gauss"))
-        except (IdentError, ValueError, np.linalg.LinAlgError):
-            continue
-    return out
+    """:func:`_block_jackknife` of Z_cu's two-input loop model y ← (c, u)."""
+    return _block_jackknife(d, lambda dk: oe(dk, list(m.nb), list(m.nf), list(m.nk), init=m, **_JK_FIT))
 
 
 def _swing_jackknife(d: IdData, m: PolyModel) -> list[PolyModel]:
-    """The G_jp fits with each of :data:`JACKKNIFE_BLOCKS` contiguous blocks of ``d`` left out, each from
-    the full fit ``m`` (:data:`JACKKNIFE_MAXITER` iterations). Why: on the zoo (30-min excited logs at the
-    controller rate) the sandwich covariance plus :func:`model_error` covered max|S| in 64 % of the runs,
-    max|G_1| 87 %, G_p 86 %: the residuals of a decimated closed loop are neither white nor independent of
-    the past input, which a covariance formula assumes away and a jackknife does not. The sd is taken
-    per ω (:func:`zcu_swing`'s responses), which also gives the peaks': the jackknife sd of each refit's
-    own maximum was the same or smaller (within 1 %, or 0.3-0.8× on B, F, C ideal) on 7 zoo logs, as the
-    envelope theorem says."""
-    edges = np.linspace(0, d.N, JACKKNIFE_BLOCKS + 1).astype(int)
+    """:func:`_block_jackknife` of G_jp (:func:`zcu_swing`), from the full fit with its poles pulled in."""
     start = _pulled_in(m)
-    nb, nf = m.nb[0], m.nf[0]
-    out = []
-    for a, b in itertools.pairwise(edges):
-        keep = np.ones(d.N, bool)
-        keep[a:b] = False
-        try:
-            dk = d.split(keep, min_length=50)
-            out.append(oe(dk, nb, nf, m.nk[0], init=start, multistart=False, maxiter=JACKKNIFE_MAXITER,
-                          ic="estimate", covariance="gauss"))
-        except (IdentError, ValueError, np.linalg.LinAlgError):
-            continue
-    return out
+    return _block_jackknife(d, lambda dk: oe(dk, m.nb[0], m.nf[0], m.nk[0], init=start, **_JK_FIT))
+
+
+def _jackknife_sd(values: np.ndarray) -> np.ndarray:
+    """Jackknife sd per column of ``values`` (refits × ω), scaled by :data:`JACKKNIFE_T_FACTOR` to stand in
+    for a normal sd in the z × sd intervals."""
+    n = values.shape[0]
+    return JACKKNIFE_T_FACTOR * np.sqrt((n - 1.0) / n * np.sum((values - values.mean(axis=0)) ** 2, axis=0))
 
 
 def _delay_check(d: IdData, m: PolyModel, order: tuple[int, int], responses: Responses, controller_of,
@@ -987,9 +973,9 @@ def zur(
     responses = responses_of(m)
     newton = None
     if not m.report.converged:
-        # The search's Jacobian is not the exact one with ic="estimate" (ident.pem._IcProjection): it
-        # stopped short on 8 of 10 30-min logs of the paper's plant at 30 dB, 10 of 10 at 12 dB. One exact
-        # step from its end point shows which quantities that matters for (analysis.quality.search_short).
+        # A search stopped short of the minimum (before the search's gradient was made exact, on 8 of 10
+        # 30-min logs of the paper's plant at 30 dB, 10 of 10 at 12 dB): one exact step from its end point
+        # shows which quantities that matters for (analysis.quality.search_short).
         try:
             newton = responses_of(newton_step(m, d, ic=FIT["ic"]).model)
         except (IdentError, ValueError, np.linalg.LinAlgError):
@@ -1113,10 +1099,7 @@ def zu(
             spread = np.max([np.abs(mk.freqresp(w, 0).value - g.value) for mk in rivals], axis=0)
             g = _widened(g, spread / Z95)
         if len(jk) >= JACKKNIFE_MIN_FITS:
-            a = np.abs(np.array([mk.freqresp(w, 0).value for mk in jk]))
-            n = a.shape[0]
-            sd = np.sqrt((n - 1.0) / n * np.sum((a - a.mean(axis=0)) ** 2, axis=0))
-            g = _widened(g, JACKKNIFE_T_FACTOR * sd)
+            g = _widened(g, _jackknife_sd(np.abs(np.array([mk.freqresp(w, 0).value for mk in jk]))))
         return {"G_1": g * prep.u_delay(w)}
 
     val, warns = _validate({"ε ← u": (m, d)})
