@@ -4,8 +4,8 @@ A short version of ``benchmarks/bench_excitation.py``: 10 simulated minutes at s
 wall time per run) with and without excitation, same plant noise seed. Tolerances (issue): droop ±0.2 pp,
 max|S| and max|G_1| within 5 % of the analytic truth of paper plant 1, checked on the scheduled excitation
 (deterministic; the chain's realisation depends on the machine's load). Measured (seed 0, 2026-11-27):
-droop −0.006 pp (95 % width 0.76 pp), max|S| −0.1 %, max|G_1| +0.3 % (zcu); without excitation the zu
-droop is withheld (no covariance).
+droop −0.006 pp (95 % width 0.76 pp), max|S| −0.1 %, max|G_1| +0.3 % (zcu); without excitation zu
+gives the droop −0.06 pp (width 0.31 pp) and no max|S|.
 """
 
 from __future__ import annotations
@@ -62,11 +62,14 @@ def test_identification_with_excitation_within_tolerances(runs, scheduled):
     assert abs(with_r["droop_err_pp"]) <= 0.2
     assert abs(with_r["max_s_err_pct"]) <= 5.0
     assert abs(with_r["max_g1_err_pct"]) <= 5.0
-    # the point of exciting: over the same 10 minutes the droop interval is far narrower, or without
-    # excitation the droop is not identifiable at all (withheld with its reason, never a narrow number)
+    # the point of exciting: S (max|S|, G_p and the TSO checks) is identifiable only with r (Z_u gives
+    # G_1 alone, paper 6.3). The droop both give, each within its interval's reach: over 10 minutes Z_cu's
+    # jackknife interval (0.76 pp wide) is no narrower than Z_u's at 3 s (0.31 pp, 2026-11-27); before
+    # Z_u went to 3 s its droop here was withheld
     assert with_r["droop_ci_width_pp"] is not None
-    if "droop_ci_width_pp" in without:
-        assert with_r["droop_ci_width_pp"] < 0.1 * without["droop_ci_width_pp"]
+    assert "max_s" in with_r and "max_s" not in without
+    if "droop_err_pp" in without:
+        assert abs(without["droop_err_pp"]) <= 0.2
     else:
         assert without["droop_reason"]
 

@@ -46,7 +46,7 @@ Methods
 - ``zur`` (Section 4.2.1): the paper's direct MISO Box-Jenkins model ε ← (u, r) (eq. 14) with G_p from
   eq. 15. Biased at realistic process noise, as the paper found (Remark 7, Section 7.3): :func:`zur`.
 - ``zu`` (Sections 4.2.1 eq. 16, 6.3): no excitation. SISO Box-Jenkins ε ← u, nk = 0 (the output-error
-  loop form degenerates: with r = 0, ε = −y), at 1 s, several candidate orders, smallest BIC (:func:`zu`).
+  loop form degenerates: with r = 0, ε = −y), at 3 s, several candidate orders, smallest BIC (:func:`zu`).
   S and G_p are NOT reported (paper Section 6.3).
 - ``sine`` (Section 4.1): per period least-squares sine fits (:mod:`fcrlive.analysis.sine_fit`), giving
   F(jω), G_req (eq. 11-13) and the Req. 10 linearity figure.
@@ -1114,8 +1114,26 @@ def coherence_fn(
     return coherence
 
 
-ZU_TS_MIN = 1.0
-"""Z_u is identified at max(ts_id, this) [s] (:func:`zu`)."""
+ZU_TS_MIN = 3.0
+"""Z_u is identified at max(ts_id, this) [s] (:func:`zu`).
+
+Why 3 s and not 1 s: at 1 s Z_u's droop was biased LOW by process noise with intervals too narrow for it.
+On 15-min paper-plant1 records at 12 dB, the chosen model alone (its own sd, before the widening): at 1 s
+median error −0.045 pp, 31 of 40 seeds (0-39) covered, 9 fits more than 1 pp off; at 40 dB (nearly no
+process noise) −0.000 pp at 1 s as at 2 s, and at 12 dB over 60 min −0.002 pp: a noise effect of short
+records, not the structure. The white process noise S·v dominates ε from ~0.3 rad/s up to the
+anti-aliasing edge (2.5 rad/s at 1 s), where u carries little but the loop's own response to that noise;
+a low-order B/F and C/D then trade the fit of that band against the static gain, and the likelihood has
+more wrong basins (orders differing by 1-25 pp on the same record). Measured at Ts (same seeds, chosen
+model alone): 1.5 s median −0.030 pp, covered 32/40; 2 s −0.013, 35/40; 2.5 s −0.012, 38/40; 3 s
+−0.009, 38/40, all 40 within 1 pp; 4 s −0.007, 38/40. Full pipeline (order spread and jackknife, as
+reported): at 1 s droop shown 17 / covered 14 of seeds 0-19 and 10 / 9 of seeds 20-39 (misses −0.06 …
+−0.30 pp); at 3 s 20 / 18 and 20 / 20, median error 0.018 and 0.014 pp, worst −0.148 pp (seed 18,
+interval to −0.007 pp) and −0.124 pp; max|G_1| where shown median 2 % off (8-14 % at 1 s); 0.40 s per
+15-min identification instead of 1.0 s. The static gain needs no fast dynamics: the loop's slowest
+poles (70-114 s) are 23-38 samples at 3 s. At 2 s the pipeline covered 16 of 20 (seeds 0-19); at 4 s
+19/20 and 20/20 with a worst error of 0.45 pp; the estimation notes on other logs found 2-5 s good and
+10 s too coarse."""
 ZU_ORDERS = ((3, 2, 2, 3), (3, 3, 3, 3), (3, 4, 4, 3), (3, 2, 2, 4), (3, 4, 4, 4))
 """Candidate Box-Jenkins orders (nb, nc, nd, nf) of Z_u; the smallest BIC wins (:func:`zu`)."""
 ZU_ORDER_DBIC = 10.0
@@ -1154,10 +1172,11 @@ def zu(
     right basin) on roughly every other record, a different order on another. Several candidate orders
     (``orders``: one (nb, nc, nd, nf) or a sequence of them, default :data:`ZU_ORDERS`) are therefore
     fitted and the smallest BIC = N log V + p log N wins; the wrong basins lose clearly. The data are
-    decimated to max(``ts_id``, :data:`ZU_TS_MIN` = 1 s) (``prep`` given: used as it is): at 0.5 s the
-    same search missed seed 0 of paper-plant1 (−0.86 percentage points) and ran longer; S·v is white up
-    to ~0.3 rad/s and the static gain needs no fast dynamics. Measured on paper-plant1, 12 dB, 15 min:
-    docs/identify.md.
+    decimated to max(``ts_id``, :data:`ZU_TS_MIN` = 3 s) (``prep`` given: used as it is): at 0.5 s the
+    same search missed seed 0 of paper-plant1 (−0.86 percentage points) and ran longer, and at 1 s the
+    droop was biased low by the process noise with intervals that missed it (on 4 of 27 shown 15-min
+    records, seeds 0-39; see :data:`ZU_TS_MIN`); the static gain needs no fast dynamics. Measured on
+    paper-plant1, 12 dB, 15 min: docs/identify.md.
     """
     prep = prep or prepare(signals, ts_id=max(ts_id, ZU_TS_MIN), names=("u", "epsilon"))
     _check_length(prep, "zu")
