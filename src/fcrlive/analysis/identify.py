@@ -310,6 +310,10 @@ def _identify(
         )
     if kd == 0.0:
         extra.append("Kd = 0 assumed: the droop shown is 1/(1/G_1(0)), i.e. including the speed damping")
+    ni: dict[str, str] = {}
+    if method == "zcu" and H is None:
+        diag = lb.diagnostics(sig)
+        ni = quality.zcu_meter_noise(diag.bands, diag.u_noise_pct_rated)
     rep = build_report(
         a,
         method_reason=reason,
@@ -324,6 +328,7 @@ def _identify(
         controller=controller,
         extra_warnings=extra,
         notes=list(exp.notes),
+        not_identifiable=ni,
     )
     return Identification(rep, a, exp)
 
