@@ -261,7 +261,7 @@ def test_zcu_coverage_20_seeds(truth):
     """Empirical coverage of Z_cu's 95 % intervals over 20 seeds (measured with the jackknife of the loop
     model: droop 1.00, max|G_1| 0.95, max|S| 0.85; the covariance alone gave 0.85, 0.85-0.90, 0.65-0.70).
     Accuracy: the median error within the tolerance, and a value outside it only with an interval that
-    says so (covers the truth): seed 1010 put max|S| 5.5 % low with the truth inside [1.10, 1.33]."""
+    says so (covers the truth): seed 1011 put max|S| 5.5 % low with the truth inside [1.10, 1.33]."""
     hits = {"droop": 0, "max_g1": 0, "max_s": 0}
     errs: dict[str, list[float]] = {k: [] for k in hits}
     n = 20
