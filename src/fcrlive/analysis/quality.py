@@ -268,10 +268,12 @@ def zcu_meter_noise(bands, floor_pct: float, *, threshold: float = ZCU_MIN_U_SNR
     0-2, no H): with 0.1 % meter noise (SNR 3-20 dB at 0.06-0.4 rad/s) max|S| −28 … +143 % and max|G_1|
     −85 … −21 %, nearly all outside their intervals; on ideal logs (24-54 dB) the plants without derivative
     action and with Kd > 0 (A, E) within 3 %, covered. The droop (G_1 at ω → 0, where u's SNR is 35-40 dB
-    even at 0.1 %) was within 1.8 % of its value and covered, so it stays. What the gate does not see:
-    Kd = 0 units (B: max|S| −25 … −28 % on ideal logs), D (−5 … −6 %), F (+16 … +21 %), G (max|G_1|
-    −4 … −6 %), and process noise above the paper's 12 dB (paper-plant1 at 6 dB: max|S| +7 … +12 %, 2
-    of 8 covered), all with H given are right or withheld (docs/zoo.md)."""
+    even at 0.1 %) was within 1.8 % of its value and covered, so it stays. On the ideal logs it also
+    withholds the Kd = 0 unit B (max|S| −25 … −28 % before). Not this gate's: process noise above the
+    paper's 12 dB (paper-plant1 at 6 dB: max|S| +7 … +12 %, 2 of 8 covered) and F (+16 … +21 %), which the
+    loop model's delay check withholds where they lean on the delay (experiments._loop_delay_check); still
+    shown and missed on ideal logs: D max|S| −5 … −6 %, G max|G_1| −4 … −6 % (with H: right or withheld,
+    docs/zoo.md)."""
     lo, hi = ZCU_U_SNR_BAND
     inside = [b for b in bands if b.hi > lo and b.lo < hi and np.isfinite(b.snr_u_db)]
     worst = min(inside, key=lambda b: b.snr_u_db, default=None)
