@@ -34,7 +34,14 @@ def test_the_written_excitation_stays_within_the_limit_and_is_what_the_plant_got
     assert exc.device["heartbeat_timeouts"] == 0 and exc.device["clamped_writes"] == 0
     assert exc.r_consistent is True  # the r the identification uses is the r the writer wrote
     assert st["active_s"] > 0.8 * 60 * MINUTES  # excited most of the time: hold-off 30 s (+ any step gaps)
-    assert set(st["time_by_reason_s"]) <= {"holdoff", "step_gap", "stopping", "stopped"}
+    allowed = {"holdoff", "step_gap", "stopping", "stopped"}
+    if any(e.state == "link_down" for e in exc.events):
+        # a write that found no answer within 0.2 s on a loaded machine (seen in CI): the guard then holds r
+        # at zero until the link and the measurements are back, and a new hold-off follows; every such
+        # inhibition must come with the link-down event, never on its own
+        allowed |= {"link_down", "stale_measurement", "not_permitted:status_unknown"}
+        assert exc.events[-1].state != "link_down"  # it came back
+    assert set(st["time_by_reason_s"]) <= allowed
     print(f"max written {st['max_abs_written_hz'] * 1e3:.1f} mHz of 100; inhibited {st['time_by_reason_s']}")
 
 
