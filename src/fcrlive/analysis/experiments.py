@@ -583,6 +583,21 @@ def _loop_output_error(
 # The experiments
 
 
+def _controller_of(ctl: ControllerEstimate, m_ca: PolyModel) -> Callable[..., FreqResp]:
+    """ω ↦ c/ε with the droop loop closed, ``G_s`` the servo's response at ω (default: ``m_ca``, a ← c)."""
+
+    def controller_of(w: np.ndarray, G_s: FreqResp | None = None) -> FreqResp:
+        G_s = m_ca.freqresp(w, 0) if G_s is None else G_s
+        if ctl.digital is not None:
+            return ctl.digital.C(w, G_s)
+        x = G_s if ctl.signal == "gate" else 1.0
+        # c/ε = G_c/(1 + ρ K_ρ G_x), the integrator of G_c and K_ρ cancelling
+        L_d = ctl.droop * FreqResp.known(w, ctl.K_rho(w)) * x
+        return FreqResp.known(w, ctl.G_c(w)) / (1.0 + L_d)
+
+    return controller_of
+
+
 def zcu(
     signals: PlantSignals,
     *,
@@ -625,15 +640,7 @@ def zcu(
     ctl = controller
     jk = _loop_jackknife(d_cu, m_cu) if jackknife else []
 
-    def controller_of(w: np.ndarray, G_s: FreqResp | None = None) -> FreqResp:
-        """c/ε with the droop loop closed (G_s: the servo's response at w, fitted a ← c)."""
-        G_s = m_ca.freqresp(w, 0) if G_s is None else G_s
-        if ctl.digital is not None:
-            return ctl.digital.C(w, G_s)
-        x = G_s if ctl.signal == "gate" else 1.0
-        # c/ε = G_c/(1 + ρ K_ρ G_x), the integrator of G_c and K_ρ cancelling
-        L_d = ctl.droop * FreqResp.known(w, ctl.K_rho(w)) * x
-        return FreqResp.known(w, ctl.G_c(w)) / (1.0 + L_d)
+    controller_of = _controller_of(ctl, m_ca)
 
     def responses(omega) -> dict[str, FreqResp]:
         w = np.atleast_1d(np.asarray(omega, float))
@@ -827,13 +834,7 @@ def zcu_swing(
     G_J_of = lambda w: 1.0 / (2.0 * H * 1j * w + kd)  # noqa: E731
     q_swing = float(np.exp(-kd * prep.Ts / (2.0 * H)))  # G_J's pole at the decimated rate
 
-    def controller_of(w: np.ndarray, G_s: FreqResp | None = None) -> FreqResp:
-        """c/ε with the droop loop closed (G_s: the servo's response at w, fitted a ← c)."""
-        G_s = m_ca.freqresp(w, 0) if G_s is None else G_s
-        if ctl.digital is not None:
-            return ctl.digital.C(w, G_s)
-        x = G_s if ctl.signal == "gate" else 1.0
-        return FreqResp.known(w, ctl.G_c(w)) / (1.0 + ctl.droop * FreqResp.known(w, ctl.K_rho(w)) * x)
+    controller_of = _controller_of(ctl, m_ca)
 
     jk = _swing_jackknife(d, m_cu) if jackknife else []
 
@@ -925,16 +926,20 @@ def _widened(fr: FreqResp, sd_min: np.ndarray) -> FreqResp:
 
 
 def _pulled_in(m: PolyModel, nk: int | None = None) -> PolyModel:
-    """``m`` as a start: poles inside :data:`START_RADIUS`; with ``nk`` its numerator delayed to it."""
-    f = m.f[0]
-    r = np.roots(f)
-    a = np.abs(r)
-    if np.any(a > START_RADIUS):
-        f = np.real(np.poly(np.where(a > START_RADIUS, r / np.maximum(a, 1e-300) * START_RADIUS, r)))
-    b = m.b[0]
+    """``m`` as a start: the poles of every input inside :data:`START_RADIUS`; with ``nk`` the first
+    input's numerator delayed to it."""
+    fs = []
+    for f in m.f:
+        r = np.roots(f)
+        a = np.abs(r)
+        if np.any(a > START_RADIUS):
+            f = np.real(np.poly(np.where(a > START_RADIUS, r / np.maximum(a, 1e-300) * START_RADIUS, r)))
+        fs.append(f)
+    b, nks = list(m.b), list(m.nk)
     if nk is not None and nk != m.nk[0]:
-        b = np.concatenate((np.zeros(nk), b[m.nk[0]:]))
-    return replace(m, f=(f,), b=(b,), nk=(nk if nk is not None else m.nk[0],), covariance=None)
+        b[0] = np.concatenate((np.zeros(nk), m.b[0][m.nk[0]:]))
+        nks[0] = nk
+    return replace(m, f=tuple(fs), b=tuple(b), nk=tuple(nks), covariance=None)
 
 
 def _block_jackknife(d: IdData, refit: Callable[[IdData], PolyModel]) -> list[PolyModel]:
@@ -1032,16 +1037,8 @@ def _loop_delay_check(d: IdData, m: PolyModel, responses: Responses, controller_
     from fcrlive.analysis.assess import peak_band  # assess imports this module
 
     k = m.nk[0] + 1
-    b0 = np.concatenate((np.zeros(k), m.b[0][m.nk[0]:]))
-    fs = []
-    for f in m.f:
-        r = np.roots(f)
-        a = np.abs(r)
-        fs.append(np.real(np.poly(np.where(a > START_RADIUS, r / np.maximum(a, 1e-300) * START_RADIUS, r)))
-                  if np.any(a > START_RADIUS) else f)
-    init = replace(m, b=(b0, m.b[1]), f=tuple(fs), nk=(k, m.nk[1]), covariance=None)
     try:
-        m2 = oe(d, list(m.nb), list(m.nf), [k, m.nk[1]], init=init, multistart=False,
+        m2 = oe(d, list(m.nb), list(m.nf), [k, m.nk[1]], init=_pulled_in(m, k), multistart=False,
                 maxiter=DELAY_CHECK_MAXITER, ic="estimate", covariance="gauss")
     except (IdentError, ValueError, np.linalg.LinAlgError) as exc:
         notes.append(f"delay check not possible (the refit with {k} samples of delay failed: {exc})")
