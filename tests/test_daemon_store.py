@@ -122,6 +122,45 @@ def test_sigkill_loses_at_most_the_last_second(tmp_path):
     assert [r["clean"] for r in runs] == [0, 1]
 
 
+# A second process takes the exclusive lock on the -shm's "dead man switch" byte only when no live
+# connection holds it shared; it then re-initialises the wal-index: ftruncate(-shm, 3) under the mapping
+# of every connection that lost its lock, whose next commit dies of SIGBUS (unix VFS, UNIX_SHM_DMS).
+PROBE_DMS = textwrap.dedent("""
+    import fcntl, os, sys
+    fd = os.open(sys.argv[1], os.O_RDWR)
+    try:
+        fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB, 1, 128)
+        print("free")
+    except OSError:
+        print("held")
+    os.close(fd)
+""")
+
+
+def test_another_writing_connection_keeps_the_writers_locks(tmp_path):
+    """Opening a second writing connection while the sample writer runs (the operation log does, at every
+    daemon start) must not drop the writer's locks: closing any descriptor of a file drops all of the
+    process's POSIX locks on it (then the e2e SIGKILL test's daemon could die of SIGBUS)."""
+    db = tmp_path / "s.sqlite"
+    with SampleWriter(db, SIGNALS) as w:
+        for s in _samples(20):
+            w.add(s)
+        assert w.flush()
+
+        def dms() -> str:
+            return subprocess.run([sys.executable, "-c", PROBE_DMS, f"{db}-shm"], capture_output=True,
+                                  text=True, check=True).stdout.strip()
+
+        assert dms() == "held"
+        connect(db).close()
+        assert dms() == "held"
+        w.add(Sample(5000.0, math.nan, 0, {"power": 1.0, "grid_freq": 50.0}, Quality.OK))
+        assert w.flush()
+    con = connect(db, readonly=True)
+    assert con.execute("SELECT count(*) FROM samples").fetchone()[0] == 21
+    con.close()
+
+
 def test_retention_deletes_old_samples(tmp_path):
     db = tmp_path / "s.sqlite"
     now = time.time()

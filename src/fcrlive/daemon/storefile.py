@@ -8,6 +8,16 @@ which the umask does not touch) is enough; a store created 0644 by an older vers
 A missing parent directory is created (0700) only under the state directory
 (:func:`fcrlive.daemon.config.checks.state_dir`); anywhere else it is an error: a mistyped path run as root
 must not become ``mkdir -p /nonexistent-dir/x``.
+
+No descriptor of an EXISTING store file (or its ``-wal``/``-shm``) is ever opened here: the daemon calls
+:func:`prepare` on every writing :func:`~fcrlive.daemon.store.connect`, the operation log's included, while
+its sample writer's connection is open, and closing ANY descriptor of a file drops every POSIX lock the
+process holds on it (SQLite's own included; sqlite.org/howtocorrupt.html §2.2). Without its shared lock on
+the ``-shm`` the daemon looks gone to the next connection of another process (the test's or an operator's
+reader), which re-initialises the wal-index: ``ftruncate(-shm, 3)`` under the daemon's mapping, whose next
+commit then dies of SIGBUS (or, between the truncation and the rebuild, works from a stale wal-index). So
+an existing file is checked and tightened by path (``stat``/``chmod``, no descriptor); only a file created
+here, which nobody can have locked yet, is opened.
 """
 
 from __future__ import annotations
@@ -49,32 +59,34 @@ def prepare(path: str | Path) -> Path:
             except OSError as exc:
                 raise ConfigError(f"cannot create {d} ({exc.strerror})", where="store.path") from None
             log.info("store: created directory %s (0700)", d)
-    try:
-        fd = os.open(p, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0), MODE)
+    try:  # a new file only: O_EXCL (an existing one may be under this process's SQLite locks)
+        fd = os.open(p, os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), MODE)
+    except FileExistsError:
+        if not os.access(p, os.R_OK | os.W_OK, effective_ids=os.access in os.supports_effective_ids):
+            why = "Permission denied" if p.exists() else "a dangling symbolic link"
+            raise ConfigError(f"cannot open the store {p} ({why})", where="store.path") from None
     except OSError as exc:
         raise ConfigError(f"cannot open the store {p} ({exc.strerror})", where="store.path") from None
-    try:
-        _private(fd, p)
-    finally:
-        os.close(fd)
-    for suffix in SIDE_FILES:
-        side = p.with_name(p.name + suffix)
+    else:
         try:
-            fd = os.open(side, os.O_RDWR | getattr(os, "O_CLOEXEC", 0))
-        except OSError:
-            continue  # not there (or not ours): SQLite creates it with the database file's mode
-        try:
-            _private(fd, side)
+            os.fchmod(fd, MODE)  # the umask does not touch fchmod
         finally:
             os.close(fd)
+    for side in (p, *(p.with_name(p.name + suffix) for suffix in SIDE_FILES)):
+        _private(side)
     return p
 
 
-def _private(fd: int, p: Path) -> None:
-    st = os.fstat(fd)
+def _private(p: Path) -> None:
+    """Mode 0600 for ``p`` when it exists and is ours: by path, never through a descriptor (module
+    docstring)."""
+    try:
+        st = os.stat(p)
+    except OSError:
+        return  # not there: SQLite creates it with the database file's mode
     mode = stat.S_IMODE(st.st_mode)
     if mode == MODE or st.st_uid != os.geteuid():
         return
-    os.fchmod(fd, MODE)
+    os.chmod(p, MODE)
     if st.st_size and mode & 0o077:
         log.warning("store: %s was readable by others (mode %o); now %o", p, mode, MODE)
