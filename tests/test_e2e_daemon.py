@@ -30,13 +30,13 @@ sim_device = pytest.importorskip("sim_device")
 
 def _toml(path: Path, *, port: int, store: Path, mqtt_port: int | None, poll_hz: float, window_min: float,
           every_min: float, function: str | None = None, unit: str = "G1", extra: str = "",
-          unit_extra: str = "", device_speed: float = 1.0) -> Path:
+          unit_extra: str = "", device_speed: float = 1.0, min_ok_fraction: float = 0.5) -> Path:
     mqtt = {"port": mqtt_port, "stats_interval_s": 2.0, "backoff_max_s": 1.0} if mqtt_port else None
     path.write_text(daemon_toml(unit=unit, port=port, regmap=ROOT / "sim_device" / "registers.toml",
                                 poll_hz=poll_hz, store=store,
                                 identification={"every_min": every_min, "window_min": window_min,
-                                                "device_speed": device_speed, "min_ok_fraction": 0.5,
-                                                "function": function},
+                                                "device_speed": device_speed,
+                                                "min_ok_fraction": min_ok_fraction, "function": function},
                                 mqtt=mqtt, unit_extra=unit_extra, extra=extra))
     return path
 
@@ -161,8 +161,12 @@ async def test_results_over_mqtt_survive_a_broker_outage(tmp_path):
 async def test_sigkill_mid_window_keeps_committed_samples_and_next_window_spans_both_runs(tmp_path):
     async with sim_device.SimGovernor(port=0, speed=60.0, seed=2) as gov:
         db = tmp_path / "s.sqlite"
+        # the 60-s window holds ~12 s of run 1 and ~24 s of run 2 (≤ 60 % ok with perfect polling), and on
+        # a loaded machine the in-process simulated governor misses polls (41 % seen): this test is about
+        # the window spanning both runs, not the data's quality
         cfg = _toml(tmp_path / "c.toml", port=gov.port, store=db, mqtt_port=None, poll_hz=25.0,
-                    window_min=1.0, every_min=0.4, function="fcrlive_plugins.testing:fake_identify")
+                    window_min=1.0, every_min=0.4, function="fcrlive_plugins.testing:fake_identify",
+                    min_ok_fraction=0.1)
         log1, log2 = tmp_path / "d1.log", tmp_path / "d2.log"
         p1 = _daemon(cfg, log1)
         try:
