@@ -84,3 +84,24 @@ def test_pid_plant_end_to_end_by_zcu_with_the_data_sheet():
     assert abs(rep.droop.value - t.droop) < 0.0005  # 0.05 percentage points
     assert abs(rep.max_abs_s.value / t.max_s - 1) < 0.08
     assert abs(rep.max_abs_g1.value / t.max_g1 - 1) < 0.05
+
+
+def test_exact_log_of_a_classic_pid_gives_its_true_derivative_filter(records):
+    """Without noise the gate is an exact function of c and EVERY derivative filter constant fits c to
+    rounding, each with its own split of the gate terms; the one whose three droop estimates agree is the
+    governor's. Before, the search's minimum over a flat 1e-13 residual was a rounding coin toss (Tdf
+    0.013 or 0.008 s for the true 0.2 s), and with it c/ε through the fitted servo: a record perturbed in
+    the 15th digit must give the same equation."""
+    name = "F-pid-classic-2pct-25Hz"
+    gov = zoo.zoo_plant(name).plant.unit.governor
+    sig = lg.signals(records[name], zoo.zoo_logger("ctl-ideal"), seed=1)
+    a, b = sig.segments[0]
+    ic = cm.identify(sig.epsilon[a:b], sig.c[a:b], sig.a[a:b], sig.Ts)
+    assert ic.governor.Tdf == pytest.approx(gov.Tdf, rel=1e-3)
+    assert ic.governor.droop == pytest.approx(gov.droop, rel=1e-6)
+    rng = np.random.default_rng(0)
+    eps = sig.epsilon[a:b] * (1.0 + 1e-15 * rng.standard_normal(b - a))
+    ic2 = cm.identify(eps, sig.c[a:b], sig.a[a:b], sig.Ts)
+    assert ic2.structure == ic.structure
+    np.testing.assert_allclose(ic2.digital.b_x, ic.digital.b_x, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(ic2.digital.a, ic.digital.a, rtol=1e-6, atol=1e-9)
