@@ -902,7 +902,9 @@ START_RADIUS = 1.0 - 1e-5
 which the search refuses as a start)."""
 DELAY_CHECK_SHIFT = 0.12
 """Relative move of max|S| (or max|G_1|) with one more sample of input delay in G_jp beyond which, when
-also outside its 95 % interval, the quantity is not identifiable (:func:`_delay_check`)."""
+also outside its 95 % interval, the quantity is not identifiable (:func:`_delay_check`). max|G_1| needs no
+such move once max|S| is withheld (the same loop): on the zoo's PID F (ideal logs, seeds 0-4) max|S| moved
+−15 … −21 % and max|G_1| −5 … −10 %, outside intervals that missed its +4 … +6 % error on 4 seeds."""
 DELAY_CHECK_MAXITER = 100
 """Search iterations of the delay check's refit. Its numerator starts one sample off, further from its
 minimum than the jackknife's refits: with 30 iterations 4 of the zoo's 70 refits stopped at the limit on
@@ -1087,7 +1089,10 @@ def _delay_compare(responses: Responses, loop2, nk: int, Ts: float, w_hi: float,
         lo, hi = pk.ci95()
         v2, _ = peak(lambda w, k=key: np.abs(loop2(w)[k]), OMEGA_MIN, w_hi, 1000)
         seen.append(f"{label} {pk.value:.4g} [{lo:.4g}, {hi:.4g}] → {v2:.4g}")
-        if abs(v2 / pk.value - 1.0) > shift and not lo <= v2 <= hi:
+        # G_1 = G_J S comes from the same loop: once max|S| hangs on the delay, max|G_1| outside its
+        # interval with the other delay is not trusted either, however small its move (DELAY_CHECK_SHIFT)
+        moved = abs(v2 / pk.value - 1.0) > shift or (key == "G_1" and "max_abs_s" in ni)
+        if moved and not lo <= v2 <= hi:
             why = (f"not identifiable from this log (model structure): {label} depends on the assumed input "
                    f"delay of G_jp = y/c: {pk.value:.3g} [{lo:.3g}, {hi:.3g}] with a delay of {nk} "
                    f"sample ({nk * Ts:g} s), {v2:.3g} with {nk + 1} samples")
