@@ -119,6 +119,9 @@ def _zur_report_is_honest(res) -> None:
                                       max_g1_omega=a.max_g1.omega)
     for key, why in noise.items():
         assert r.not_identifiable[key] == why
+    if res.experiment.unpolished:  # stopped after its first search: the gate withholds all, and says why
+        _zur_unpolished_withholds_all(res)
+        return
     assert (r.gp is None) == ("gp" in r.not_identifiable)
     if fit.converged:
         assert not any("stopped short" in x for x in r.not_identifiable.values())
@@ -142,21 +145,58 @@ def _zur_report_is_honest(res) -> None:
         assert any("stopped short of the minimum" in n for n in r.notes)
 
 
+def _zur_unpolished_withholds_all(res) -> None:
+    """A Z_ur fit stopped after its first search (ex.zur's ``stop_if_withheld``): every quantity withheld
+    with the Remark 7 gate's whole-fit reason, the note saying the search was not polished, no Newton
+    step, and no warning quoting the unpolished fit's numbers."""
+    r, exp = res.report, res.experiment
+    assert exp.newton is None
+    for key in quality.ZUR_QUANTITIES:
+        why = r.not_identifiable[key]
+        assert why.startswith(quality.NOT_IDENTIFIABLE) and "(paper Remark 7)" in why and "Z_ur's fit" in why
+    for key in ("droop", "g1_static", "max_abs_g1", "max_abs_s"):
+        assert getattr(r, key).value is None
+    assert r.gp is None and r.tso is None and r.local is None
+    assert any(n.startswith("Z_ur search not polished") for n in r.notes)
+    assert not any(w.startswith(("local stability", "identified G_", "residual test")) for w in r.warnings)
+
+
 def test_zur_at_12db_droop_and_bias_warning(excited, truth):
     # the paper's finding (Remark 7, Section 7.3): Z_ur is biased by the process noise reaching u. The
     # droop still comes out right; S does not (measured seeds 0-4: max|S| +6..+26 % near 0.6 rad/s,
     # docs/identify.md), so the report must say so rather than present S as trustworthy. The estimates
-    # are those of the assessment behind the report: the report withholds them when the search did not
-    # converge (_zur_report_is_honest)
+    # are those of the polished fit (ex.zur as studies call it); the pipeline stops this log's search after
+    # its first start, since the Remark 7 gate withholds everything (_zur_report_is_honest)
     sig = replace(excited, c=None, a=None)
-    res = identify_full(sig, rated_mw=300.0, kd=KD)
-    r, a = res.report, res.assessment
-    assert r.method == "zur"
+    a = assess(ex.zur(sig), kd=KD)
     assert abs(a.droop.value - truth["droop"]) <= 0.002
     assert abs(a.max_g1.value / truth["max_g1"] - 1.0) <= 0.15
     assert a.max_s is not None and a.gp is not None
+    res = identify_full(sig, rated_mw=300.0, kd=KD)
+    r = res.report
+    assert r.method == "zur"
     assert any("Z_ur is biased" in w for w in r.warnings)
+    assert res.experiment.unpolished
     _zur_report_is_honest(res)
+
+
+def test_zur_pipeline_stops_unpolished_only_where_withheld(excited):
+    # 12 dB, 50 Hz, seed 0: the first search's u-residual coherence over 0.05-0.5 rad/s is 0.59, beyond
+    # the Remark 7 gate (0.25) by more than ZUR_CLEAR_MARGIN: the pipeline stops there, and withholds
+    # every quantity for the gate's reason (its coherence from that first fit) with the note
+    run = identify_full(replace(excited, c=None, a=None), rated_mw=300.0, kd=KD, method="zur")
+    assert run.experiment.unpolished
+    _zur_unpolished_withholds_all(run)
+    gate = quality.zur_process_noise(None, run.experiment.coherence["u-residual"])
+    assert {k: run.report.not_identifiable[k] for k in gate} == gate
+    # 30 dB (first search 0.08): polished as before, the numbers shown
+    res = simulate(PLANT, SimConfig(duration_s=1800, snr_db=30.0, excitation=True, seed=0))
+    run = identify_full(replace(plant_signals(log_from_sim(res), rated_mw=300.0), c=None, a=None),
+                        rated_mw=300.0, kd=KD, method="zur")
+    assert not run.experiment.unpolished
+    assert not any("not polished" in n for n in run.report.notes)
+    for key in ("droop", "g1_static", "max_abs_g1", "max_abs_s"):
+        assert getattr(run.report, key).value is not None, key
 
 
 @pytest.mark.parametrize("seed", (0, 1))

@@ -339,3 +339,19 @@ def test_search_short_nulls_only_the_gp_points_the_step_moved():
     out = quality.withhold(rep, ni)
     assert out.gp[1].abs is None and out.gp[1].reason == ni["gp_60s"] and out.gp[0].abs == 0.5
     assert out.tso["fcrn"].verdict == "undecided"
+
+
+def test_zur_fails_clearly_only_beyond_the_margin():
+    # the pre-check of ex.zur: a first search's residual stops the multistart only when the whole-fit gate
+    # fails by more than ZUR_CLEAR_MARGIN (between the gate and the margin the fit is polished as before)
+    def flat(c):
+        return lambda w: np.full(np.shape(w), c)
+
+    thr, margin = quality.ZUR_MAX_NOISE_COHERENCE, quality.ZUR_CLEAR_MARGIN
+    note = quality.zur_fails_clearly(flat(thr + margin + 0.05))
+    assert note is not None and note.startswith("Z_ur search not polished") and "0.45" in note
+    assert quality.zur_fails_clearly(flat(thr + margin - 0.05)) is None  # fails the gate, not clearly
+    assert quality.zur_fails_clearly(flat(0.1)) is None
+    assert quality.zur_fails_clearly(None) is None
+    # what it stops is withheld whole by the gate it anticipates
+    assert set(quality.zur_process_noise(None, flat(thr + margin + 0.05))) == set(quality.ZUR_QUANTITIES)

@@ -176,7 +176,7 @@ def assess(
     if g > 0:
         d = local.effective_droop(g, kd, sd=sd)
         droop = Interval(d.value, d.lower, d.upper)
-    else:
+    elif "g1_static" not in ni:  # a withheld fit (ExperimentResult.not_identifiable) quotes no numbers
         warns.append(f"identified G_1(1) = {g:.3g} is not positive: no droop")
     max_g1 = _peak(fr, "G_1", wpk)
     G1c = _callable(fr, "G_1")
@@ -207,7 +207,7 @@ def assess(
                 F = lambda w: F0(w) * fme(w)  # noqa: E731
                 F_sd = lambda w: Fs0(w) * np.abs(fme(w))  # noqa: E731
             tso = assess_tso(F, products=products, omega_wide=(1e-4, wmax), F_sd=F_sd)
-        else:
+        elif "g1_static" not in ni:
             warns.append(f"identified G_p(0) = {gp0:.3g} is not positive: TSO checks skipped")
         if "max_abs_s" in ni:  # eq. 9 and the margins come from the same S and loop
             sens = margins = None

@@ -63,6 +63,7 @@ import numpy as np
 import scipy.signal as sps
 
 from fcrlive.analysis import controller as ctl_mod
+from fcrlive.analysis import quality
 from fcrlive.constants import Z95
 from fcrlive.errors import DataError
 from fcrlive.ident import FreqResp, IdData, IdentError, ResidResult, bj, oe, resid, xresid
@@ -278,6 +279,10 @@ class ExperimentResult:
     """Z_ur whose search stopped short of the minimum: the responses after one exact Newton step from the
     fit (:func:`fcrlive.ident.pem.newton_step`); how far each quantity moves with it, in its standard
     errors, decides whether it is shown (:func:`fcrlive.analysis.quality.search_short`). None otherwise."""
+    unpolished: bool = False
+    """Z_ur stopped after its first search because its residual fails the Remark 7 gate by a wide margin
+    (:func:`zur` with ``stop_if_withheld``): every quantity is withheld for that reason, not judged by the
+    search's convergence (the note says so)."""
     coherence: dict[str, Callable[[np.ndarray], np.ndarray]] | None = None
     """ω [rad/s] → magnitude-squared coherence (Welch, :func:`coherence_fn`) of two signals of the
     identification data. "u-residual": u and the fit's residual, the share of u that the process noise
@@ -1181,6 +1186,7 @@ def zur(
     ts_id: float = DEFAULT_TS_ID,
     prep: Prepared | None = None,
     orders: tuple[int, int, int, int] = ZUR_ORDERS,
+    stop_if_withheld: bool = False,
 ) -> ExperimentResult:
     """Z_ur (Section 4.2.1, eq. 14-15): the paper's direct MISO model ε = G_1 u + S r + H e.
 
@@ -1198,6 +1204,13 @@ def zur(
     :func:`fcrlive.analysis.quality.search_short`). The output-error loop form y ← (ε, u) that Z_cu's success
     suggests fails here even on noise-free data: ε and u are nearly collinear at low frequencies
     (ε ≈ G_1 u), so G_J G_p and G_J are not separated.
+
+    ``stop_if_withheld`` (the pipeline, :func:`fcrlive.analysis.identify.identify_full`, which applies
+    the Remark 7 gate): when the residual of the first search (one start) already fails that gate by a
+    wide margin (:func:`fcrlive.analysis.quality.zur_fails_clearly`), the restarts and the Newton step are
+    skipped and the result is that first fit, marked ``unpolished`` with a note: the gate withholds every
+    quantity of such a fit however far it is polished. Studies of Z_ur's bias (fcrlive montecarlo) keep
+    the default and always get the polished fit.
     """
     if not signals.has_excitation:
         raise DataError("zur needs an excitation (ApplFreqSig differing from GridFreq)")
@@ -1205,10 +1218,25 @@ def zur(
     _check_length(prep, "zur")
     d = prep.iddata("epsilon", ("u", "r"))
     nb, nc, nd, nf = orders
-    # every start: with the exact search gradient a single converged search ended in a worse basin on
-    # one of 10 30-min paper-plant1 logs at 30 dB (max|G_1| −11.9 % outside its interval; every start:
-    # −0.5 %), at about 0.2 s more
-    m = _fit("ε ← (u, r)", bj, d, [nb, nb], nc, nd, [nf, nf], [0, 0], multistart=True, **FIT)
+    m = None
+    coh_u = None
+    notes: tuple[str, ...] = ()
+    if stop_if_withheld:
+        # the first search of the multistart below (ident.pem keeps it: the multistart does not repeat it)
+        try:
+            m1 = bj(d, [nb, nb], nc, nd, [nf, nf], [0, 0], multistart=False, **FIT)
+            coh_1 = coherence_fn(d.u[:, 0], m1.residuals(d), prep.Ts)
+        except (IdentError, ValueError, np.linalg.LinAlgError):
+            m1 = None  # the multistart below says what went wrong, as without the pre-check
+        if m1 is not None:
+            note = quality.zur_fails_clearly(coh_1)
+            if note is not None:
+                m, coh_u, notes = m1, coh_1, (note,)
+    if m is None:
+        # every start: with the exact search gradient a single converged search ended in a worse basin on
+        # one of 10 30-min paper-plant1 logs at 30 dB (max|G_1| −11.9 % outside its interval; every start:
+        # −0.5 %), at about 0.2 s more
+        m = _fit("ε ← (u, r)", bj, d, [nb, nb], nc, nd, [nf, nf], [0, 0], multistart=True, **FIT)
 
     def responses_of(mod: PolyModel) -> Responses:
         def responses(omega) -> dict[str, FreqResp]:
@@ -1221,7 +1249,7 @@ def zur(
 
     responses = responses_of(m)
     newton = None
-    if not m.report.converged:
+    if not (m.report.converged or notes):
         # A search stopped short of the minimum (before the search's gradient was made exact, on 8 of 10
         # 30-min logs of the paper's plant at 30 dB, 10 of 10 at 12 dB): one exact step from its end point
         # shows which quantities that matters for (analysis.quality.search_short).
@@ -1229,10 +1257,14 @@ def zur(
             newton = responses_of(newton_step(m, d, ic=FIT["ic"]).model)
         except (IdentError, ValueError, np.linalg.LinAlgError):
             newton = None
-    val, warns = _validate({"ε ← (u, r)": (m, d)})
+    # an unpolished fit's residual tests say nothing about the model (its search was stopped early)
+    val, warns = ({}, []) if notes else _validate({"ε ← (u, r)": (m, d)})
     coh = {"r-epsilon": coherence_fn(prep.signals["r"], prep.signals["epsilon"], prep.Ts)}
-    with contextlib.suppress(IdentError, ValueError):
-        coh["u-residual"] = coherence_fn(d.u[:, 0], m.residuals(d), prep.Ts)
+    if coh_u is not None:
+        coh["u-residual"] = coh_u
+    else:
+        with contextlib.suppress(IdentError, ValueError):
+            coh["u-residual"] = coherence_fn(d.u[:, 0], m.residuals(d), prep.Ts)
     warns.append(
         "Z_ur is biased when process noise reaches the electric power (paper Remark 7): on the paper's "
         "plant at 12 dB max|S| came out up to 25 % high and the intervals of S and G_p do not cover that "
@@ -1240,7 +1272,10 @@ def zur(
     )
     return ExperimentResult(
         "zur", prep.Ts, d.N, prep.duration_s, {"epsilon<-(u,r)": m}, responses, ("G_1", "S", "G_p"), None,
-        val, tuple(warns), (), newton=newton, coherence=coh,
+        val, tuple(warns), notes, newton=newton, coherence=coh, unpolished=bool(notes),
+        # the gate's reasons for every quantity (quality.zur_process_noise, whole-fit band: it fails
+        # there): assess then states no check or warning from this fit's S, G_1 or static gains
+        not_identifiable=quality.zur_process_noise(None, coh_u) if notes else {},
     )
 
 

@@ -189,6 +189,9 @@ def _not_identifiable(res: Identification, *, kd: float = 0.0, t_fme_s: float | 
         noise = quality.zur_process_noise(rep.max_abs_s.omega if rep.max_abs_s else None,
                                           (exp.coherence or {}).get("u-residual"),
                                           max_g1_omega=rep.max_abs_g1.omega if rep.max_abs_g1 else None)
+        if exp.unpolished:
+            # stopped after its first search (ex.zur's pre-check): the gate above withholds every quantity
+            return noise, None
         if fit.converged or exp.newton is None:
             return {**noise, **quality.zur_not_converged(fit.converged, fit.stop_reason)}, None
         a2 = assess(replace(exp, responses=exp.newton), kd=kd, t_fme_s=t_fme_s,
@@ -288,7 +291,7 @@ def _identify(
                                      reason=f"Z_cu rejected by the data ({why}); lowband instead",
                                      t_fme_s=t_fme_s, peak_min_period_s=peak_min_period_s)
     elif method == "zur":
-        exp = ex.zur(sig, ts_id=ts_id)
+        exp = ex.zur(sig, ts_id=ts_id, stop_if_withheld=True)
     else:
         exp = ex.zu(sig, ts_id=ts_id)
     a = assess(exp, kd=kd, t_fme_s=t_fme_s, peak_min_period_s=peak_min_period_s)

@@ -719,8 +719,9 @@ def _add_noise_model(st: _Struct, segs, Bs, Fs, n_ar: int) -> np.ndarray:
 
 
 START_CACHE_SETS = 2
-"""Data sets whose high-order ARX models and Steiglitz-McBride starts :func:`_pem` keeps (Z_u fits five
-candidate orders on one data set: the same ARX for each, the same B/F start for equal nb, nf)."""
+"""Data sets whose high-order ARX models, Steiglitz-McBride starts and first searches :func:`_pem` keeps
+(Z_u fits five candidate orders on one data set: the same ARX for each, the same B/F start for equal nb,
+nf; Z_ur's pre-check searches from the first start once, its multistart reuses that search)."""
 _START_CACHE: OrderedDict = OrderedDict()
 
 
@@ -957,7 +958,12 @@ def _pem(data: IdData, st: _Struct, method: str, *, init: PolyModel | None, mult
             lazy.append(shorter)
     if not np.all(np.isfinite(starts[0])) or not _stable(st, starts[0]):
         raise UnstableModelError(f"initial {method.upper()} model could not be stabilised")
-    results: list[_SearchResult] = [_search(st, starts[0], segs, maxiter, tol)]
+    # The first search is kept with the starts: a caller that fits the same data and orders once with
+    # one start and again with every start (analysis.experiments.zur's pre-check) searches from this start
+    # once; the search is a function of the start, so the result is the same either way.
+    first = lambda: _search(st, starts[0], segs, maxiter, tol)  # noqa: E731
+    key = ("search", st, starts[0].tobytes(), maxiter, tol)
+    results: list[_SearchResult] = [first() if init is not None else _cached(cache, key, first)]
     best = results[0]
 
     def run(s: np.ndarray) -> None:
