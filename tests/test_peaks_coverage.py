@@ -71,9 +71,12 @@ def test_delay_check_withholds_max_s_gp_and_tso_with_the_reason():
     assert rep.not_identifiable["gp"] == why and rep.not_identifiable["tso"] == why
     assert rep.gp is None and rep.f is None and rep.tso is None
     assert rep.local is None or rep.local.sensitivity_pass is None
-    # the droop and max|G_1| do not depend on it here and stay
+    # the droop does not depend on it and stays
     assert rep.droop.value == pytest.approx(tr.droop, abs=5e-4)
-    assert rep.max_abs_g1.value is not None and "max_abs_g1" not in rep.not_identifiable
+    # max|G_1| comes from the same loop: its refit (0.715) is outside its interval ([0.763, 0.819], the
+    # truth 0.748), a move of only 10 %, withheld because max|S| is
+    why_g1 = rep.not_identifiable["max_abs_g1"]
+    assert "max|G_1| depends on the assumed input delay" in why_g1 and rep.max_abs_g1.value is None
 
 
 def test_a_log_where_the_delay_does_not_matter_keeps_everything():
@@ -83,9 +86,12 @@ def test_a_log_where_the_delay_does_not_matter_keeps_everything():
     assert a.not_identifiable == {} and a.tso is not None and a.sensitivity is not None
 
 
-def test_delay_check_withholds_max_g1_and_eq10_on_their_own_reason():
+def test_delay_check_withholds_max_g1_and_eq10_on_their_own_reason(monkeypatch):
     # the poorly damped unit on an ideal log (zoo G, seed 4): max|G_1| 1.25 with one sample of delay, 1.03
-    # with two; max|S| does not move beyond its interval and stays, with the checks that need only S
+    # with two; max|S| does not move beyond its interval and stays, with the checks that need only S. The
+    # delay check on its own: with the two-rate bias check's widening both intervals hold the refit
+    # (max|G_1| [1.02, 1.48], the truth 1.075) and both are shown
+    monkeypatch.setattr(ex, "RATE_CHECK_FACTOR", 0.0)
     sig, tr = _signals("G-classic-fwd-40Hz-poor", 4)
     rep = identify_signals(sig, rated_mw=tr.rated_mw, kd=tr.kd, h=tr.H)
     why = rep.not_identifiable["max_abs_g1"]
