@@ -796,11 +796,11 @@ def zcu_swing(
     :data:`JACKKNIFE_FADE` so the droop keeps its covariance interval. A delay check
     (:func:`_delay_check`) withholds max|S| with G_p and the TSO checks, and max|G_1| on its own, where
     one more sample of input delay in G_jp moves them by more than :data:`DELAY_CHECK_SHIFT` and out of
-    their intervals (``ExperimentResult.not_identifiable``): the data leave the answer to the assumed
-    structure. With ``rate_check`` (default) G_jp is fitted once more at half the sample time and the
-    intervals of |S|, |G_1| and |G_p| grow by the two fits' difference (:func:`_rate_check_fit`): the
-    closed-loop bias above shrinks with the sample time, which the jackknife cannot see. Measured
-    figures in docs/zoo.md.
+    their intervals (``ExperimentResult.not_identifiable``; max|G_1| by any move out of its interval once
+    max|S| is withheld): the data leave the answer to the assumed structure. With ``rate_check``
+    (default) G_jp is fitted once more at half the sample time and the intervals of |S|, |G_1| and |G_p|
+    grow by the two fits' difference (:func:`_rate_check_fit`): the closed-loop bias above shrinks with
+    the sample time, which the jackknife cannot see. Measured figures in docs/zoo.md.
     """
     if signals.c is None or signals.a is None:
         raise DataError("zcu needs ContOutSig and GuideVane (controller output and gate position)")
