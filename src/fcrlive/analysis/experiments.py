@@ -1001,9 +1001,7 @@ def _rate_check_fit(
                 # faster rate: its decay as a positive pole; then inside START_RADIUS (a Kd = 0 unit's
                 # swing pole sits on the circle, which a start may not)
                 r = np.where((np.abs(r.imag) < 1e-12) & (r.real < 0), np.abs(r), r) ** (prep2.Ts / prep.Ts)
-                a = np.abs(r)
-                r = np.where(a > START_RADIUS, r / np.maximum(a, 1e-300) * START_RADIUS, r)
-                init = _ls_init(d2, [np.real(np.poly(r))], [order[0]], [1])
+                init = _ls_init(d2, [np.real(np.poly(_inside(r)))], [order[0]], [1])
                 m = oe(d2, order[0], order[1], 1, init=init, multistart=False, **FIT)
         if m is None:
             m = _swing_search(d2, *order, prep2.Ts, H, kd)
@@ -1018,15 +1016,20 @@ def _rate_check_fit(
     return m, float(np.exp(-kd * prep2.Ts / (2.0 * H)))
 
 
+def _inside(r: np.ndarray) -> np.ndarray:
+    """Poles ``r`` with those beyond :data:`START_RADIUS` moved onto it (same angle)."""
+    a = np.abs(r)
+    return np.where(a > START_RADIUS, r / np.maximum(a, 1e-300) * START_RADIUS, r)
+
+
 def _pulled_in(m: PolyModel, nk: int | None = None) -> PolyModel:
     """``m`` as a start: the poles of every input inside :data:`START_RADIUS`; with ``nk`` the first
     input's numerator delayed to it."""
     fs = []
     for f in m.f:
         r = np.roots(f)
-        a = np.abs(r)
-        if np.any(a > START_RADIUS):
-            f = np.real(np.poly(np.where(a > START_RADIUS, r / np.maximum(a, 1e-300) * START_RADIUS, r)))
+        if np.any(np.abs(r) > START_RADIUS):
+            f = np.real(np.poly(_inside(r)))
         fs.append(f)
     b, nks = list(m.b), list(m.nk)
     if nk is not None and nk != m.nk[0]:
