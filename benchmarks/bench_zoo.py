@@ -132,17 +132,13 @@ def _fit(task: Task, logger: str, sig, tr, method: str, with_plant: bool, with_h
 
 def run_task(task: Task, method: str = "auto", with_plant: bool = False, with_h: bool = True) -> list[dict]:
     """Simulate one record, read it through each logger, identify: one row per logger."""
-    from threadpoolctl import threadpool_limits
-
     from fcrlive.sim import logger as lg
     from fcrlive.sim import zoo
 
     tr = zoo.truth(task.plant)
-    # one BLAS thread for the simulation: with two its state updates differ in the 16th digit, and the
-    # ideal logs' searches that stop short of their minimum (B, F, G) then end elsewhere; the estimators
-    # themselves give the same numbers on the same record whatever the thread count
-    with threadpool_limits(1):
-        res = zoo.simulate(task.plant, minutes=task.minutes, excitation=task.excitation, seed=task.seed)
+    # the simulation and the identification run on one BLAS thread whatever the process was started with
+    # (fcrlive.blas): the same rows under OPENBLAS_NUM_THREADS=1 and 2
+    res = zoo.simulate(task.plant, minutes=task.minutes, excitation=task.excitation, seed=task.seed)
     rows = []
     for name in task.loggers:
         sig = lg.signals(res, zoo.zoo_logger(name), seed=zoo.logger_seed(task.seed, name))

@@ -9,6 +9,7 @@ import pkgutil
 import sys
 
 from fcrlive import __version__, commands
+from fcrlive.blas import one_thread
 from fcrlive.errors import UserError
 
 
@@ -40,7 +41,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        return int(args._run(args) or 0)
+        # one BLAS thread: the same log gives the same numbers whatever the machine's thread count
+        with one_thread():
+            return int(args._run(args) or 0)
     except UserError as exc:
         for line in str(exc).splitlines() or [""]:  # several configuration problems: one line each
             print(f"fcrlive {args.command}: error: {line}", file=sys.stderr)

@@ -34,6 +34,7 @@ from fcrlive.analysis import quality
 from fcrlive.analysis.assess import OMEGA_MIN, PEAK_MIN_PERIOD_S, Assessment, assess, peak_band
 from fcrlive.analysis.controller import ControllerFitError
 from fcrlive.analysis.report import IdentifyReport, build_report
+from fcrlive.blas import single_threaded
 from fcrlive.constants import F0_HZ
 from fcrlive.errors import DataError, UserError
 from fcrlive.signals import PlantSignals, excitation_detected
@@ -140,6 +141,7 @@ SLOW_LOG_S = 0.03
 """Logs sampled more slowly than this [s] get the warning on biased peaks for Z_cu/Z_ur (see below)."""
 
 
+@single_threaded
 def identify_full(
     signals: PlantSignals | Sequence[PlantSignals],
     *,

@@ -67,6 +67,7 @@ from typing import TYPE_CHECKING, Literal, NamedTuple
 
 import numpy as np
 
+from fcrlive.blas import single_threaded
 from fcrlive.gridsearch import peak as grid_peak
 from fcrlive.plant.params import Plant, Turbine, Unit
 
@@ -404,6 +405,7 @@ def _discrete(unit: Unit, G_J: Rat, G_jp: Rat, u_hold: UHold) -> DiscreteTFs:
     )
 
 
+@single_threaded
 def analytic(plant: Plant, *, u_hold: UHold = "zoh") -> PlantTFs:
     """All transfer functions of ``plant.unit`` in its grid, continuous and at dt = Tc.
 

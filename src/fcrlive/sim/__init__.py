@@ -40,6 +40,7 @@ from typing import Literal
 
 import numpy as np
 
+from fcrlive.blas import single_threaded
 from fcrlive.constants import PAPER_EXCITATION_STD_PU, TSO_STATIONARY_PERIODS
 from fcrlive.errors import ConfigError
 from fcrlive.plant.params import Plant
@@ -302,6 +303,7 @@ def _finish(raw: dict, prep: _Prepared, config: SimConfig, gens_list, N: int) ->
     return out
 
 
+@single_threaded
 def simulate(plant: Plant, config: SimConfig | None = None) -> SimResult:
     """One realisation of the closed loop (module docstring), from steady state at Pm0.
 
@@ -320,6 +322,7 @@ def simulate(plant: Plant, config: SimConfig | None = None) -> SimResult:
                      seed=int(config.seed))
 
 
+@single_threaded
 def simulate_batch(plant: Plant, config: SimConfig | None = None, seeds: Sequence[int] = (0,), *,
                    fields: Sequence[str] | None = None) -> BatchSimResult:
     """Realisations for ``seeds`` stepped together (realisation i equals ``simulate`` with

@@ -35,6 +35,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.signal import lfilter
 
+from fcrlive.blas import single_threaded
 from fcrlive.plant.params import Plant
 from fcrlive.sim import model as mdl
 
@@ -71,6 +72,7 @@ class ClosedLoop:
 
 
 @lru_cache(maxsize=64)
+@single_threaded
 def closed_loop(plant: Plant, open_loop: bool = False) -> ClosedLoop:
     """The :class:`ClosedLoop` of ``plant`` (cached)."""
     m = mdl.build(plant)
@@ -325,6 +327,7 @@ def _n(Tc: float, seconds: float) -> int:
 
 
 @lru_cache(maxsize=64)
+@single_threaded
 def load_noise_std(plant: Plant) -> float:
     """Intensity σ_L [pu system base / sqrt(s)] of the random-walk load: ΔP_L(t+Tc) = ΔP_L(t) + σ_L √Tc ξ.
 

@@ -45,6 +45,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.linalg import expm
 
+from fcrlive.blas import single_threaded
 from fcrlive.errors import ConfigError
 from fcrlive.plant.params import Governor, Plant, Unit
 
@@ -237,6 +238,7 @@ def _check(plant: Plant) -> None:
 
 
 @lru_cache(maxsize=64)
+@single_threaded
 def build(plant: Plant) -> Model:
     """The :class:`Model` of ``plant`` (cached: plants are frozen and hashable)."""
     _check(plant)

@@ -38,6 +38,7 @@ from typing import Literal
 
 import numpy as np
 
+from fcrlive.blas import single_threaded
 from fcrlive.constants import TSO_PERIODS_S
 from fcrlive.errors import ConfigError
 from fcrlive.plant.params import Governor, Grid, Plant, Servo, Swing, Turbine, Unit
@@ -276,6 +277,7 @@ def _exact(plant: Plant, which: str, omega, droop: float) -> np.ndarray:
 
 
 @lru_cache(maxsize=64)
+@single_threaded
 def _truth(plant: Plant, name: str) -> Truth:
     from fcrlive.gridsearch import peak
     from fcrlive.plant import transfer as tr
@@ -319,6 +321,7 @@ def _truth(plant: Plant, name: str) -> Truth:
 # Records and logs
 
 
+@single_threaded
 def simulate(plant: str, *, minutes: float, excitation: bool = False, seed: int = 0, **config):
     """The controller-rate record (fcrlive.sim.SimResult) of a zoo plant: its SNR and model, the
     paper's white excitation when ``excitation``, no meter noise (the logger adds that). ``config``
