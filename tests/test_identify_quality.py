@@ -355,3 +355,29 @@ def test_zur_fails_clearly_only_beyond_the_margin():
     assert quality.zur_fails_clearly(None) is None
     # what it stops is withheld whole by the gate it anticipates
     assert set(quality.zur_process_noise(None, flat(thr + margin + 0.05))) == set(quality.ZUR_QUANTITIES)
+
+
+# -- warnings that quote a withheld number ------------------------------------------------------------
+
+def test_a_withheld_max_s_takes_its_stability_alarm_with_it():
+    alarm = quality.WARN_MAX_S + "12.688 ≥ M_s = 1.5"
+    wide = quality.withhold(_report(max_abs_s=PeakCI(value=12.7, omega=0.3, ci95=(0.0, 71.3)),
+                                    warnings=[alarm]))
+    assert wide.max_abs_s.value is None
+    assert alarm not in wide.warnings
+    assert any(w.startswith("not identifiable from this log: max|S| 12.7") for w in wide.warnings)
+    # a max|S| that is shown keeps its alarm
+    shown = quality.withhold(_report(max_abs_s=PeakCI(value=1.6, omega=0.3, ci95=(1.55, 1.65)),
+                                     droop=ValueCI(value=0.08, ci95=(0.0, 0.5)), warnings=[alarm]))
+    assert shown.max_abs_s.value == 1.6
+    assert alarm in shown.warnings
+
+
+def test_a_withheld_droop_takes_the_sign_of_g_p0_with_it():
+    gp0 = quality.WARN_GP0 + "-1.66 is not positive: TSO checks skipped"
+    out = quality.withhold(_report(droop=ValueCI(value=0.0688, ci95=(0.0, 0.171)), warnings=[gp0]))
+    assert out.droop.value is None
+    assert gp0 not in out.warnings
+    kept = quality.withhold(_report(max_abs_s=PeakCI(value=1.3, omega=0.3, ci95=(0.0, 3.0)), warnings=[gp0]))
+    assert kept.droop.value == 0.08
+    assert gp0 in kept.warnings

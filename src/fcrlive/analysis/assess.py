@@ -28,6 +28,7 @@ import numpy as np
 
 from fcrlive.analysis import local
 from fcrlive.analysis.experiments import ExperimentResult, SineExperiment
+from fcrlive.analysis.quality import WARN_G1_0, WARN_GP0, WARN_MAX_S
 from fcrlive.analysis.tso_checks import TsoVerdict, assess_tso, assess_tso_points, fme_response
 from fcrlive.constants import TSO_PERIODS_S, Z95
 from fcrlive.gridsearch import uncertain_peak
@@ -177,7 +178,7 @@ def assess(
         d = local.effective_droop(g, kd, sd=sd)
         droop = Interval(d.value, d.lower, d.upper)
     elif "g1_static" not in ni:  # a withheld fit (ExperimentResult.not_identifiable) quotes no numbers
-        warns.append(f"identified G_1(1) = {g:.3g} is not positive: no droop")
+        warns.append(f"{WARN_G1_0}{g:.3g} is not positive: no droop")
     max_g1 = _peak(fr, "G_1", wpk)
     G1c = _callable(fr, "G_1")
     # eq. 10 comes from the same G_1 as max|G_1|
@@ -208,11 +209,11 @@ def assess(
                 F_sd = lambda w: Fs0(w) * np.abs(fme(w))  # noqa: E731
             tso = assess_tso(F, products=products, omega_wide=(1e-4, wmax), F_sd=F_sd)
         elif "g1_static" not in ni:
-            warns.append(f"identified G_p(0) = {gp0:.3g} is not positive: TSO checks skipped")
+            warns.append(f"{WARN_GP0}{gp0:.3g} is not positive: TSO checks skipped")
         if "max_abs_s" in ni:  # eq. 9 and the margins come from the same S and loop
             sens = margins = None
         elif not sens.passed:
-            warns.append(f"local stability (eq. 9): max|S| = {sens.max_s:.3f} ≥ M_s = {sens.ms:g}")
+            warns.append(f"{WARN_MAX_S}{sens.max_s:.3f} ≥ M_s = {sens.ms:g}")
     return Assessment(
         result.method,
         kd,

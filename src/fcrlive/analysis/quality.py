@@ -54,6 +54,19 @@ QUANTITIES: tuple[tuple[str, str, float, str], ...] = (
 )
 """(report key, label, display scale, unit) of the scalar quantities the rules judge."""
 
+WARN_MAX_S = "local stability (eq. 9): max|S| = "
+WARN_GP0 = "identified G_p(0) = "
+WARN_G1_0 = "identified G_1(1) = "
+QUOTING_WARNINGS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    (WARN_MAX_S, ("max_abs_s",)),
+    (WARN_GP0, ("droop", "g1_static", "gp")),
+    (WARN_G1_0, ("droop", "g1_static")),
+)
+"""Assessment warnings (analysis.assess) that quote an identified number, by their start, and the report
+keys they quote: :func:`withhold` drops such a warning once one of those is withheld. A withheld max|S|
+went on as "local stability (eq. 9): max|S| = 12.688 ≥ M_s = 1.5" beside "not identifiable: max|S| 12.7
+with a 95 % interval [0, 71.3]" (Z_ur at 6 dB): an alarm raised by the number the report refuses to give."""
+
 ZUR_NOT_CONVERGED = "Z_ur search did not converge: {stop}; no quantity of Z_ur is identifiable from this log"
 """Reason of every Z_ur quantity when its Box-Jenkins search did not converge (``{stop}``: the search's
 stop reason, e.g. "maximum number of iterations (78) reached")."""
@@ -479,5 +492,9 @@ def withhold(report: IdentifyReport, not_identifiable: Mapping[str, str] | None 
         update["local"] = None
     if not update:
         return report
+    withheld = set(ni) | ({"gp"} if "gp" in update and update["gp"] is None else set())
+    warnings = [w for w in warnings
+                if not any(w.startswith(start) and withheld.intersection(keys)
+                           for start, keys in QUOTING_WARNINGS)]
     update.update(not_identifiable=ni, warnings=warnings)
     return report.model_copy(update=update)
