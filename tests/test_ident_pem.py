@@ -213,3 +213,24 @@ def test_newton_step_from_a_perturbed_start_lowers_the_loss():
     # Gauss-Newton on a nearly linear problem: one step lands close to the minimum
     assert abs(st.model.f[0][1] - m.f[0][1]) < 0.2 * 2e-4
     assert st.model.static_gain(0)[0] == pytest.approx(m.static_gain(0)[0], rel=2e-3)
+
+
+def test_fixed_b_factor_matches_a_monte_carlo_of_the_bartlett_t_statistic():
+    # |t| of a sample mean with the Bartlett HAC variance at lag M (weights 1 − τ/(M + 1), as _hac_sum):
+    # its 95 % quantile is the fixed-b critical value the sandwich's scaling stands for
+    from fcrlive.ident.pem import fixed_b_factor
+
+    rng = np.random.default_rng(7)
+    n, reps = 600, 4000
+    x = rng.standard_normal((reps, n))
+    m = x.mean(axis=1)
+    e = x - m[:, None]
+    f = np.fft.rfft(e, 2 * n, axis=1)
+    ac = np.fft.irfft(f * np.conj(f), axis=1)[:, :n] / n
+    assert fixed_b_factor(0, 10**9) == pytest.approx(1.0, abs=1e-6)
+    for M in (30, 60, 120):
+        w = 1.0 - np.arange(1, M + 1) / (M + 1.0)
+        t = np.sqrt(n) * m / np.sqrt(ac[:, 0] + 2.0 * (ac[:, 1:M + 1] * w).sum(axis=1))
+        cv = np.quantile(np.abs(t), 0.95)
+        assert cv / 1.96 > 1.01  # the plain ±1.96 is too narrow
+        assert fixed_b_factor(M, n) == pytest.approx(cv / 1.96, rel=0.04)
