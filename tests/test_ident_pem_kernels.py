@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fcrlive.ident.pem import _hac_lag, _hac_sum, _IcProjection, _sandwich, _Struct
+from fcrlive.ident.pem import _hac_lag, _hac_sum, _IcProjection, _sandwich, _Struct, fixed_b_factor
 
 
 def _svd_basis(Phi: np.ndarray) -> np.ndarray:
@@ -79,7 +79,8 @@ def test_sandwich_equals_its_definition():
     bounds = [(0, 1200), (1200, n)]
     M = _hac_lag(eps, bounds)
     Hi = np.linalg.inv(J.T @ J)
-    P_def = Hi @ _lag_sum_direct(J * eps[:, None], bounds, M) @ Hi
+    # the Newey-West sandwich with the fixed-b critical value of its lag (pem.fixed_b_factor)
+    P_def = Hi @ _lag_sum_direct(J * eps[:, None], bounds, M) @ Hi * fixed_b_factor(M, n) ** 2
     np.testing.assert_allclose(_sandwich(J, eps, bounds), P_def, rtol=1e-9, atol=1e-12 * np.abs(P_def).max())
 
 
@@ -94,6 +95,6 @@ def test_sandwich_rank_deficient_jacobian_uses_the_identifiable_subspace():
     s = np.sqrt((J**2).sum(axis=0))
     Hp = np.linalg.pinv((J / s).T @ (J / s)) / np.outer(s, s)
     M = _hac_lag(eps, [(0, n)])
-    P_def = Hp @ _lag_sum_direct(J * eps[:, None], [(0, n)], M) @ Hp
+    P_def = Hp @ _lag_sum_direct(J * eps[:, None], [(0, n)], M) @ Hp * fixed_b_factor(M, n) ** 2
     np.testing.assert_allclose(P, P_def, rtol=1e-8, atol=1e-10 * np.abs(P_def).max())
     assert np.linalg.eigvalsh(P).min() > -1e-15 * np.abs(P).max()

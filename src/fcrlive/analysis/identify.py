@@ -274,7 +274,7 @@ def _identify(
             if H is not None:
                 exp = ex.zcu_swing(sig, H=float(H), kd=kd, controller=controller, ts_id=ts_id)
             else:
-                exp = ex.zcu(sig, controller=controller, ts_id=ts_id)
+                exp = ex.zcu(sig, controller=controller, ts_id=ts_id, kd=kd)
         except ControllerFitError as exc:
             # Every quantity of Z_cu hangs on c/ε: with a controller that does not fit, none is identifiable
             # by Z_cu. With H known, auto answers from the low band instead (it needs no controller).
