@@ -618,9 +618,9 @@ def zcu(
 
     With ``kd`` (the data sheet's damping; None: no check) a swing-equation check widens the intervals
     of |S|, |G_1| and |G_p| (:func:`_swing_check`): the fitted swing path G_J is read as 1/(2Ĥs + Kd),
-    Z_cu is fitted once more with that G_J known (:func:`zcu_swing`), and SWING_CHECK_FACTOR times the
-    two fits' difference is added to the 95 % half-widths, faded in above 0.005 rad/s (the droop keeps
-    its interval).
+    Z_cu is fitted once more with that G_J known (:func:`zcu_swing`), and each 95 % interval is widened
+    (in quadrature) until it holds that fit's interval and :data:`SWING_CHECK_FACTOR` times the two fits'
+    difference, faded in above 0.005 rad/s (the droop keeps its interval).
 
     With ``delay_check`` (default) max|S| (with G_p, the TSO checks) and max|G_1| are not identifiable
     where one more sample of delay in G_jp moves them by more than :data:`LOOP_DELAY_CHECK_SHIFT` and out
@@ -704,9 +704,9 @@ def zcu(
 
 
 SWING_CHECK_FACTOR = 2.0
-"""The swing-equation allowance of :func:`zcu` without H: the 95 % half-width of |S|, |G_1| and |G_p| gains
-this multiple of the difference between Z_cu and :func:`zcu_swing` with the H read off Z_cu's own G_J
-(:func:`_swing_check`), added in quadrature."""
+"""The swing-equation allowance of :func:`zcu` without H: the 95 % half-width of |S|, |G_1| and |G_p| is at
+least this multiple of the difference between Z_cu and :func:`zcu_swing` with the H read off Z_cu's own
+G_J, and at least that difference plus the other fit's half-width (:func:`_swing_check`)."""
 SWING_CHECK_BAND = (0.05, 1.0)
 """ω [rad/s] over which Ĥ is fitted to Z_cu's G_J: Im(1/G_J) = 2Ĥω by least squares."""
 
