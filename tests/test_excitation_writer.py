@@ -8,6 +8,7 @@ import math
 import tomllib
 from dataclasses import replace
 
+import numpy as np
 import pytest
 from pydantic import ValidationError
 from test_excitation_writer_support import RMAP, governor, make_task, wait_active, wait_zero
@@ -141,9 +142,10 @@ async def test_written_samples_are_the_guard_output_and_the_device_applies_them(
     # the rate limit (0.5 Hz/s · 0.05 s = 25 mHz per tick) made the guard's output differ from the request
     active = [s for s in samples if s.active]
     assert any(s.value_hz != s.requested_hz for s in active)
-    # every non-zero value the device applied is one the writer wrote (as float32)
-    applied = {round(s.applied_hz, 7) for s in samples if s.applied_hz}
-    assert applied and applied <= {round(w, 7) for w in written}
+    # every non-zero value the device applied is one the writer wrote, as the float32 register holds it
+    # (compared exactly: rounding both to 7 decimals once split a value at a rounding boundary)
+    applied = {s.applied_hz for s in samples if s.applied_hz}
+    assert applied and applied <= {float(np.float32(w)) for w in written}
     assert task.stats.max_abs_written_hz <= 0.1 and task.status()["max_abs_written_hz"] > 0
 
 
