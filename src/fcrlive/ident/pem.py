@@ -34,6 +34,7 @@ import scipy.linalg as sla
 import scipy.signal as sps
 import scipy.stats as stats
 
+from fcrlive.constants import Z95
 from fcrlive.ident.arx import arx, per_input
 from fcrlive.ident.data import IdData
 from fcrlive.ident.errors import OrderError, TooFewSamplesError, UnstableModelError
@@ -1126,7 +1127,6 @@ z-scores had sd 1.10 and 12 of 136 beyond 1.96 (91 %). With cv(b): 127/136 (93 %
 unchanged (its jackknife inflation dominates). A Monte Carlo of the location model (N = 600, 20000
 draws, Bartlett weights 1 − τ/(M + 1)) gave cv 1.995, 2.071, 2.214, 2.372, 2.522 at b = 0.02, 0.05, 0.1,
 0.15, 0.2 against the polynomial's 2.020, 2.109, 2.261, 2.413, 2.566."""
-_Z975 = 1.959963984540054
 
 
 def fixed_b_factor(M: int, n: int) -> float:
@@ -1134,7 +1134,7 @@ def fixed_b_factor(M: int, n: int) -> float:
     its square, so that value ± 1.96 sd is the fixed-b 95 % interval wherever it is used."""
     b = min((M + 1.0) / max(n, 1), 1.0)
     a1, a2, a3 = FIXED_B
-    return (_Z975 + b * (a1 + b * (a2 + b * a3))) / _Z975
+    return (Z95 + b * (a1 + b * (a2 + b * a3))) / Z95
 
 
 def _sandwich(J: np.ndarray, eps: np.ndarray, bounds) -> np.ndarray:

@@ -321,7 +321,6 @@ def _truth(plant: Plant, name: str) -> Truth:
 # Records and logs
 
 
-@single_threaded
 def simulate(plant: str, *, minutes: float, excitation: bool = False, seed: int = 0, **config):
     """The controller-rate record (fcrlive.sim.SimResult) of a zoo plant: its SNR and model, the
     paper's white excitation when ``excitation``, no meter noise (the logger adds that). ``config``
