@@ -102,3 +102,23 @@ def test_lowband_needs_h(record):
 
     with pytest.raises(UserError, match="H"):
         identify_signals(_historian(record), rated_mw=300.0, kd=KD, method="lowband")
+
+
+def test_two_rate_bias_check_widens_the_interval_of_gp0():
+    # deterministic: the 95 % half-width of G_p(0) holds RATE_CHECK_FACTOR × the difference between the
+    # 5-s fit and the same fit at 10 s (lowband docstring, "Two-rate bias check"), here on a log where the
+    # two differ: plant B of the zoo, logged instantaneously at 2 Hz, 15 min
+    from fcrlive.analysis import lowband as lb
+    from fcrlive.constants import Z95
+    from fcrlive.sim import zoo
+
+    t = zoo.truth("B-int-beuler-10Hz")
+    sig = zoo.signals("B-int-beuler-10Hz", "fifth-0.2pct", minutes=15.0, seed=3)
+    res = lb.lowband(sig, H=t.H, kd=t.kd)
+    g0 = res.responses([0.0])["G_p"]
+    notes = [n for n in res.notes if n.startswith("two-rate bias check: G_p(0) = ")]
+    assert len(notes) == 1, res.notes
+    slow = float(notes[0].split("G_p(0) = ")[1].split()[0])
+    diff = abs(slow - float(g0.value.real[0]))
+    assert diff > 0.02 * abs(g0.value.real[0])  # the folded log: the two rates disagree
+    assert Z95 * float(g0.sd_real[0]) >= lb.RATE_CHECK_FACTOR * diff * (1 - 1e-2)  # the note: 5 digits
