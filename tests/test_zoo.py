@@ -316,3 +316,21 @@ def test_droop_of_a_log_folded_by_slow_instantaneous_samples_is_not_narrow_and_w
         lo, hi = rep.droop.ci95
         missed += not lo <= t.droop <= hi
     assert missed <= 1, (shown, missed)
+
+
+def test_a_flat_low_band_fit_is_no_resonance():
+    # plant B logged at 2 Hz, 60 min, seed 14: the lowband fit's |G_1| is flat up to the top of its band and
+    # its maximum (0.0424 at 0.158 rad/s, inside the band, coherence passing) was published with
+    # [0.036, 0.048] against a true max|G_1| of 0.677 at 0.30 rad/s. A maximum less than PEAK_MIN_RISE × the
+    # value at the band's low end is not a resonance: withheld with that reason
+    from fcrlive.analysis.identify import PEAK_MIN_RISE, identify_signals
+
+    plant = "B-int-beuler-10Hz"
+    t = zoo.truth(plant)
+    rep = identify_signals(zoo.signals(plant, "fifth-0.2pct", minutes=60.0, seed=14), rated_mw=t.rated_mw,
+                           kd=t.kd, h=t.H)
+    assert rep.method == "lowband"
+    q = rep.max_abs_g1
+    assert q.value is None and tuple(q.ci95) == (None, None)
+    assert "has no resonance" in q.reason and f"less than {PEAK_MIN_RISE:g}×" in q.reason, q.reason
+    assert rep.droop.value is not None  # the droop stays

@@ -340,6 +340,11 @@ def _identify(
 
 PEAK_EDGE_FRACTION = 0.9
 """A lowband maximum at or above this fraction of the peak band's upper end counts as the band's edge."""
+PEAK_MIN_RISE = 2.0
+"""A lowband maximum of |G_1| or |S| must be at least this multiple of the value at the band's low end to
+count as a resonance. Physics, not tuning: G_1(0) is the droop (0.02-0.1 pu) and a governed unit's
+max|G_1| is 0.5-1.1 (the zoo's truths: 12-36× G_1(0)); S rises from near 0."""
+_PEAK_RESPONSE = {"max_abs_g1": "G_1", "max_abs_s": "S"}
 
 
 def _identify_lowband(sig: PlantSignals, *, H, kd, rated, f0, reason, t_fme_s, peak_min_period_s
@@ -381,6 +386,17 @@ def _identify_lowband(sig: PlantSignals, *, H, kd, rated, f0, reason, t_fme_s, p
                 f"not identifiable from this log: the maximum at ω = {pk.omega:.3g} rad/s is not followed by "
                 f"{lb.PEAK_BRACKET:g}× its frequency inside the band the lowband fit reaches "
                 f"(≤ {band_hi:.3g} rad/s); the true peak may be above it"
+            )
+            continue
+        low = float(np.abs(exp.responses([band_lo])[_PEAK_RESPONSE[key]].value[0]))
+        if not pk.value >= PEAK_MIN_RISE * low:
+            # a maximum in the middle of the band that hardly rises above the low end is a flat curve, not a
+            # resonance (zoo B at 2 Hz, 60 min, seed 14: max|G_1| 0.0424 [0.036, 0.048] at 0.158 rad/s, its
+            # G_1(0.001) 0.0423; truth 0.677 at 0.30 rad/s, above the band the fit reaches)
+            ni[key] = (
+                f"not identifiable from this log: the low-band fit has no resonance (its maximum "
+                f"{pk.value:.3g} at ω = {pk.omega:.3g} rad/s is less than {PEAK_MIN_RISE:g}× its value "
+                f"{low:.3g} at ω = {band_lo:.3g} rad/s)"
             )
             continue
         for w in (pk.omega, lb.PEAK_BRACKET * pk.omega):

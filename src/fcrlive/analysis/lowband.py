@@ -255,8 +255,8 @@ def lowband(
             var_bias = (RATE_CHECK_FACTOR * (gp0_slow - gp0) / Z95) ** 2
             inflate = (var_model * inflate + var_bias) / var_model
             notes.append(f"two-rate bias check: G_p(0) = {gp0_slow:.5g} at Ts = {2.0 * prep.Ts:g} s; the "
-                         f"interval includes {RATE_CHECK_FACTOR:g} × the difference (covariance ×{inflate:.3g} "
-                         "in all)")
+                         f"interval includes {RATE_CHECK_FACTOR:g} × the difference "
+                         f"(covariance ×{inflate:.3g} in all)")
     if m.covariance is not None:
         m = _with_covariance(m, m.covariance * inflate)
 
