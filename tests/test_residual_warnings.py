@@ -100,14 +100,32 @@ def zoo_e_half_rate():
     return zoo.truth(plant), out
 
 
-def test_a_rejected_zcu_model_falls_back_to_lowband(zoo_e_half_rate):
-    # An excited log at half the controller rate, no plant description: Z_cu's controller fit passes,
-    # but its a ← c model still carries r (1.1-3 % of a's rms). Its numbers were wrong with narrow
-    # intervals (seed 0: droop 4.44 [4.31, 4.56] % against 6 %); auto answers from the low band instead.
+def test_a_controller_logged_below_its_rate_is_refused_by_its_rounding(zoo_e_half_rate):
+    # An excited log at half the controller rate, no plant description. The controller's equation leaves
+    # 0.74-0.83 % of Δc, under the 1 % cap, but 5.8-6.4× what the columns' rounding explains
+    # (controller.rounding_residual; at the controller rate the ratio is 1.00): refused, and auto answers
+    # from the low band. Before, Z_cu ran with that controller (seed 0: droop 4.44 [4.31, 4.56] %, truth 6 %).
     tr, sigs = zoo_e_half_rate
     for sig in sigs:
         rep = identify_signals(sig, rated_mw=tr.rated_mw, kd=tr.kd, h=tr.H)
         assert rep.method == "lowband"
+        why = rep.method_reason
+        assert why.startswith("Z_cu not possible: controller model does not fit"), why
+        assert "the columns' rounding explains" in why, why
+
+
+def test_a_rejected_zcu_model_falls_back_to_lowband(zoo_e_half_rate):
+    # A plant description that states the log's rate as the controller's (12.5 Hz for a 25 Hz governor): Z_cu
+    # runs with that controller, but its a ← c model still carries r (1.1-3 % of a's rms): the data reject
+    # the model, and auto answers from the low band instead of publishing its intervals.
+    from dataclasses import replace
+
+    tr, sigs = zoo_e_half_rate
+    wrong_rate = replace(tr.plant, unit=replace(tr.plant.unit, governor=replace(tr.plant.unit.governor,
+                                                                               Tc=float(sigs[0].Ts))))
+    for sig in sigs:
+        rep = identify_signals(sig, rated_mw=tr.rated_mw, kd=tr.kd, h=tr.H, plant=wrong_rate)
+        assert rep.method == "lowband"
         assert rep.method_reason.startswith("Z_cu rejected by the data (residual test of the a ← c model")
-        forced = identify_signals(sig, rated_mw=tr.rated_mw, kd=tr.kd, h=tr.H, method="zcu")
+        forced = identify_signals(sig, rated_mw=tr.rated_mw, kd=tr.kd, h=tr.H, method="zcu", plant=wrong_rate)
         assert any(w.startswith("residual test of the a ← c model failed") for w in forced.warnings)
