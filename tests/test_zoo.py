@@ -334,3 +334,26 @@ def test_a_flat_low_band_fit_is_no_resonance():
     assert q.value is None and tuple(q.ci95) == (None, None)
     assert "has no resonance" in q.reason and f"less than {PEAK_MIN_RISE:g}×" in q.reason, q.reason
     assert rep.droop.value is not None  # the droop stays
+
+
+def test_peak_of_a_governor_the_lag_lead_does_not_describe_is_covered_or_withheld():
+    # plant C (PID, water time 2 s) in normal operation at the controller rate, 60 min: lowband's lag-lead
+    # put max|G_1| +2.5 … +4 % high on every log, with ±1-4 % intervals that missed on seeds 2 and 3 of
+    # 0-4 (4 of 10 covered over seeds 0-9). The order check (a pole and a zero more, 2 × the difference in
+    # the interval; lowband docstring) covers it: measured 10/10 over seeds 0-9, all still shown
+    from fcrlive.analysis.identify import identify_signals
+
+    plant = "C-pid-tustin-50Hz"
+    t = zoo.truth(plant)
+    shown = missed = 0
+    for seed in range(5):
+        rep = identify_signals(zoo.signals(plant, "ctl-ideal", minutes=60.0, seed=seed), rated_mw=t.rated_mw,
+                               kd=t.kd, h=t.H)
+        assert rep.method == "lowband"
+        assert any(n.startswith("order check: G_p also fitted") for n in rep.notes), rep.notes
+        q = rep.max_abs_g1
+        if q.value is None:
+            continue
+        shown += 1
+        missed += not q.ci95[0] <= t.max_g1 <= q.ci95[1]
+    assert missed <= 1, (shown, missed)
