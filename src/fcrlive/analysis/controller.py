@@ -189,7 +189,9 @@ def rounding_residual(e, x, c, th: dict, placement: str, method: str, a_d, x_is_
     ratio residual / this figure 0.99-1.01). Logged below the controller rate it does not hold, but a slow
     PI (the zoo's D, 100 Hz, Ti = 7 s) logged at half its rate still fitted with 0.73 % of Δc, under the
     1 % of :data:`MAX_REL_RESIDUAL`, with the droop 0.2-0.7 pp off and Z_cu's droop interval ±0.03 pp
-    around it; its ratio was 4.0-5.8."""
+    around it; its ratio was 4.0-5.8. The test loses power as the rounding grows: with ε rounded to 1 mHz
+    (2e-5 pu) the controller-rate logs still fit at their rounding (A, B, D, E, F, paper plant: accepted),
+    the half-rate D and E at 1.6-1.7× (refused, near the limit)."""
     from fcrlive.signals import _resolution
 
     rng = np.random.default_rng(0)
