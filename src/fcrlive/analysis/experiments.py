@@ -1008,16 +1008,22 @@ def _replicate_sd(dev: np.ndarray) -> np.ndarray:
     return METER_T_FACTOR * np.sqrt(np.sum(np.where(keep, dev**2, 0.0), axis=0) / n)
 
 
-def meter_noise_std(u: np.ndarray, Ts: float) -> float:
-    """White-noise-equivalent std [same unit as u] of u's high-frequency floor at the log rate: the median
-    Welch density over 0.5-0.9 of the Nyquist frequency (an upper bound on the meter noise: the floor also
-    holds whatever real power fluctuation is there; the same figure as lowband's diagnostics)."""
+def u_noise_floor(u: np.ndarray, Ts: float) -> float:
+    """u's high-frequency floor at the log rate: the median one-sided Welch density [unit²/Hz] over 0.5-0.9
+    of the Nyquist frequency (NaN when that band holds no bin). An upper bound on the meter noise: the
+    floor also holds whatever real power fluctuation is there."""
     u = np.asarray(u, float)
     nps = int(min(len(u), max(64, round(64.0 / Ts))))
     f, P = sps.welch(u - u.mean(), fs=1.0 / Ts, nperseg=nps)
     w, wn = 2 * np.pi * f, np.pi / Ts
     hi = (w >= 0.5 * wn) & (w <= 0.9 * wn)
-    floor = float(np.median(P[hi])) if np.any(hi) else float("nan")
+    return float(np.median(P[hi])) if np.any(hi) else float("nan")
+
+
+def meter_noise_std(u: np.ndarray, Ts: float) -> float:
+    """White-noise-equivalent std [same unit as u] of :func:`u_noise_floor` (0 where there is none): the
+    same figure as lowband's diagnostics."""
+    floor = u_noise_floor(u, Ts)
     return float(np.sqrt(floor / (2.0 * Ts))) if np.isfinite(floor) and floor > 0 else 0.0
 
 

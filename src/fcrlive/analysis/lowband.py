@@ -178,13 +178,7 @@ def diagnostics(signals: PlantSignals) -> Diagnostics:
     """Meter-noise floor of u, band SNR and u-ε coherence (module docstring)."""
     Ts = float(signals.Ts)
     a, b = max(signals.segments, key=lambda s: s[1] - s[0])
-    u_log = np.asarray(signals.u[a:b], float)
-    nps = int(min(len(u_log), max(64, round(64.0 / Ts))))
-    f, P = sps.welch(u_log - u_log.mean(), fs=1.0 / Ts, nperseg=nps)
-    w = 2 * np.pi * f
-    wn = np.pi / Ts
-    hi = (w >= 0.5 * wn) & (w <= 0.9 * wn)
-    floor = float(np.median(P[hi])) if np.any(hi) else float("nan")  # one-sided density [pu²/Hz]
+    floor = ex.u_noise_floor(np.asarray(signals.u[a:b], float), Ts)  # one-sided density [pu²/Hz]
     sigma = np.sqrt(floor / (2.0 * Ts)) if np.isfinite(floor) else float("nan")
     ts1, segs = _one_second(signals)
     u1, e1, _ = max(segs, key=lambda s: len(s[0]))
