@@ -126,6 +126,17 @@ def main(argv: list[str] | None = None) -> None:
         )
         for m, s in cases.items():
             print(f"  {m}: {_stats(*_times(s, m, kd, args.repeat), unit='ms')}")
+        # what the daemon runs per window: one method, the one --method auto picks ([identify] method's
+        # default), with the plant description of [unit] plant
+        wall, cpu = [], []
+        for _ in range(args.repeat):
+            _fresh()
+            t0, c0 = time.perf_counter(), time.process_time()
+            rep = identify_signals(sig10, rated_mw=300.0, kd=kd, method="auto", plant=preset("paper-plant1"))
+            wall.append(time.perf_counter() - t0)
+            cpu.append(time.process_time() - c0)
+        print(f"  the daemon's re-identification (--method auto, plant description; it picked {rep.method}): "
+              f"{_stats(wall, cpu, unit='ms')}")
         if args.windows:
             per = {m: [] for m in cases}
             per_cpu = {m: [] for m in cases}

@@ -234,3 +234,21 @@ def test_fixed_b_factor_matches_a_monte_carlo_of_the_bartlett_t_statistic():
         cv = np.quantile(np.abs(t), 0.95)
         assert cv / 1.96 > 1.01  # the plain ±1.96 is too narrow
         assert fixed_b_factor(M, n) == pytest.approx(cv / 1.96, rel=0.04)
+
+
+def test_a_search_beaten_by_another_start_stops_at_statistical_accuracy():
+    """``beat``: a search that cannot end below another start's loss stops once converged to
+    STAT_TOL (fewer iterations, its loss within it of the full search's); a loss it can beat changes
+    nothing (the multistart passes each restart the best loss so far)."""
+    from fcrlive.ident.pem import BEATEN, STAT_TOL
+
+    d = _open(4000, 5, sigma=0.5)
+    start = bj_model([0.2, 0.1], [1, 0.2], [1, -0.5], [1, -1.2, 0.5], nk=1)
+    full = bj(d, 2, 1, 1, 2, 1, init=start, tol=1e-12)
+    assert full.report.stop_reason != BEATEN
+    short = bj(d, 2, 1, 1, 2, 1, init=start, tol=1e-12, beat=0.5 * full.report.loss)
+    assert short.report.stop_reason == BEATEN and short.report.converged
+    assert short.report.iterations < full.report.iterations
+    assert 0.0 <= d.N * (short.report.loss - full.report.loss) / full.report.loss <= 10 * STAT_TOL
+    same = bj(d, 2, 1, 1, 2, 1, init=start, tol=1e-12, beat=2.0 * full.report.loss)
+    np.testing.assert_array_equal(same.theta, full.theta)

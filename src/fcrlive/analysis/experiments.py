@@ -818,7 +818,8 @@ def _swing_search(d: IdData, nb: int, nf: int, Ts: float, H: float, kd: float) -
         f = np.poly(poles).real
         try:
             init = _ls_init(d, [f], [nb], [1])
-            m = oe(d, nb, nf, 1, init=init, multistart=False, **FIT)
+            m = oe(d, nb, nf, 1, init=init, multistart=False, beat=None if best is None else best.report.loss,
+                   **FIT)
         except (IdentError, ValueError, np.linalg.LinAlgError):
             continue
         if best is None or d.N * np.log(best.report.loss / m.report.loss) > 1e-2:
