@@ -89,7 +89,8 @@ def test_meter_noise_replicates_only_widen_and_say_so():
 def test_meter_noise_at_15_minutes_the_droop_is_covered_over_seeds():
     # 15-min excited logs at the controller rate with 0.1 % meter noise, plants E and G, seeds 0-7: before
     # the replicates the droop's interval missed on E seed 3 and G seed 6 (−0.1 and +0.04 pp with ±0.03 and
-    # ±0.01 pp); over 7 plants × 20 seeds 104/128 → 120/128 (docs/zoo.md)
+    # ±0.01 pp); over 7 plants × 20 seeds 104/128 → 120/128 (docs/zoo.md). G (Kd = 0) withholds most of
+    # its droops since METER_MATERIAL_PCT (its replicate refits do not converge): 8 of 16 shown here
     from fcrlive.analysis.identify import identify_signals
 
     shown = missed = 0
@@ -102,4 +103,26 @@ def test_meter_noise_at_15_minutes_the_droop_is_covered_over_seeds():
                 continue
             shown += 1
             missed += not rep.droop.ci95[0] <= t.droop <= rep.droop.ci95[1]
-    assert shown >= 10 and missed <= 1, (shown, missed)
+    assert shown >= 6 and missed <= 1, (shown, missed)
+
+
+def test_meter_noise_whose_effect_cannot_be_measured_withholds_the_droop():
+    # the Kd = 0 unit B at 15 min with excitation, seed 2: at 0.1 % meter noise only 1 of 6 replicate refits
+    # converges (the noise a random walk in y + G_J u), and the droop was published +0.032 pp off with
+    # ±0.027 pp; now it is withheld with the reason. The ideal log of the same record (floor ≈ 0.04 %, u's own
+    # content) keeps its droop.
+    from fcrlive.analysis.identify import identify_signals
+
+    t = zoo.truth("B-int-beuler-10Hz")
+    noisy = zoo.signals("B-int-beuler-10Hz", "ctl-0.1pct", minutes=15.0, seed=2, excitation=True)
+    rep = identify_signals(noisy, rated_mw=t.rated_mw, kd=t.kd, h=t.H)
+    assert rep.method == "zcu"
+    assert rep.droop is not None and rep.droop.value is None and rep.g1_static is None
+    assert "meter's noise" in rep.droop.reason and "could not be measured" in rep.droop.reason
+    assert "Kd = 0" in rep.droop.reason
+    # the peaks are not touched by this rule
+    assert "meter's noise" not in (rep.max_abs_s.reason or "") + (rep.max_abs_g1.reason or "")
+    ideal = zoo.signals("B-int-beuler-10Hz", "ctl-ideal", minutes=15.0, seed=2, excitation=True)
+    rep_i = identify_signals(ideal, rated_mw=t.rated_mw, kd=t.kd, h=t.H)
+    assert rep_i.droop is not None and rep_i.droop.value is not None
+    assert rep_i.droop.ci95[0] <= t.droop <= rep_i.droop.ci95[1]
