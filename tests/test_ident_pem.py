@@ -252,3 +252,7 @@ def test_a_search_beaten_by_another_start_stops_at_statistical_accuracy():
     assert 0.0 <= d.N * (short.report.loss - full.report.loss) / full.report.loss <= 10 * STAT_TOL
     same = bj(d, 2, 1, 1, 2, 1, init=start, tol=1e-12, beat=2.0 * full.report.loss)
     np.testing.assert_array_equal(same.theta, full.theta)
+    # an exact fit elsewhere (loss 0) beats nothing by a ratio: no division by zero, no stop
+    from fcrlive.ident.pem import _beaten
+
+    assert not _beaten(1.0, 0.0, 100, 0.0) and not _beaten(0.0, 0.0, 100, 1.0) and _beaten(2.0, 0.0, 100, 1.0)

@@ -560,7 +560,8 @@ def _beaten(V: float, pred: float, n: int, beat: float | None) -> bool:
     N·log(V/beat) > SAME_LOSS. Even a remaining decrease ten times the predicted one changes
     N·log V by at most 10·STAT_TOL = SAME_LOSS, so the multistart's choice is the same as if the search
     had run on to ``tol``."""
-    return beat is not None and pred <= STAT_TOL * V / n and n * math.log(V / beat) > SAME_LOSS
+    return (beat is not None and beat > 0.0 and V > 0.0 and pred <= STAT_TOL * V / n
+            and n * math.log(V / beat) > SAME_LOSS)
 
 
 def _search_iter(st: _Struct, th0: np.ndarray, segs, maxiter: int, tol: float,
@@ -654,7 +655,7 @@ def _lm(st, th, eps, aux, J, V, segs, maxiter, tol, beat=None):
                 return (th, V, k, True, "Levenberg-Marquardt: relative loss decrease below tolerance", eps,
                         aux, J)
             # the cheap half of _beaten first: a GN prediction costs a least-squares solve
-            if (beat is not None and eps.shape[0] * math.log(V / beat) > SAME_LOSS
+            if (beat is not None and beat > 0.0 and V > 0.0 and eps.shape[0] * math.log(V / beat) > SAME_LOSS
                     and _beaten(V, _predicted(J, eps), eps.shape[0], beat)):
                 return th, V, k, True, BEATEN, eps, aux, J
             H = J.T @ J
