@@ -43,3 +43,20 @@ def test_10_hz_log_is_flagged_and_its_droop_interval_still_holds_the_truth(sim):
     assert warned
     lo, hi = rep.droop.ci95
     assert lo <= TRUE_DROOP <= hi
+
+
+def test_a_log_at_the_controller_rate_of_a_10_hz_governor_is_not_flagged_without_a_plant():
+    # the zoo's B runs its controller at 10 Hz; its governor-side log is at 10 Hz too. Without a plant
+    # description the controller Z_cu fits from the log (to the columns' rounding) says the log is at the
+    # controller rate: no "slower than a governor's controller rate" warning. Z_ur, which fits no
+    # controller, keeps it (it cannot know).
+    from fcrlive.sim import zoo
+
+    t = zoo.truth("B-int-beuler-10Hz")
+    sig = zoo.signals("B-int-beuler-10Hz", "ctl-0.1pct", minutes=15.0, seed=2, excitation=True)
+    assert sig.Ts == pytest.approx(0.1)
+    rep = identify_signals(sig, rated_mw=t.rated_mw, kd=t.kd, h=t.H, method="zcu")
+    assert rep.method == "zcu" and rep.controller is not None
+    assert not any("slower than a governor's controller rate" in w for w in rep.warnings), rep.warnings
+    rep_ur = identify_signals(sig, rated_mw=t.rated_mw, kd=t.kd, method="zur")
+    assert any("slower than a governor's controller rate" in w for w in rep_ur.warnings)

@@ -299,7 +299,12 @@ def _identify(
     a = assess(exp, kd=kd, t_fme_s=t_fme_s, peak_min_period_s=peak_min_period_s)
     # With a plant description, "slow" means slower than its own controller; otherwise than a 50 Hz one.
     slow_log_s = 1.5 * plant.unit.governor.Tc if plant is not None else SLOW_LOG_S
-    if method in ("zcu", "zur") and sig.Ts > slow_log_s:
+    # Without one, a controller Z_cu fitted from this log says more than any default: its difference
+    # equation held per log sample within what the columns' rounding explains (analysis.controller refuses
+    # a fit 1.6-6 × above that, as on logs at half the controller rate), so the log is at the controller's
+    # rate. The warning fired on every Z_cu of the zoo's 10 Hz governor (B) logged at 10 Hz.
+    at_controller_rate = method == "zcu" and plant is None and getattr(exp, "controller", None) is not None
+    if method in ("zcu", "zur") and sig.Ts > slow_log_s and not at_controller_rate:
         # The process noise on the governor's speed signal reaches c and ε unfiltered; logged below the
         # controller rate it aliases into the band as input noise (errors in variables), and the
         # controller's difference equation no longer holds per log sample. Measured on paper-plant1
