@@ -303,7 +303,7 @@ def _identify(
     # equation held per log sample within what the columns' rounding explains (analysis.controller refuses
     # a fit 1.6-6 × above that, as on logs at half the controller rate), so the log is at the controller's
     # rate. The warning fired on every Z_cu of the zoo's 10 Hz governor (B) logged at 10 Hz.
-    at_controller_rate = method == "zcu" and plant is None and getattr(exp, "controller", None) is not None
+    at_controller_rate = method == "zcu" and plant is None and exp.controller is not None
     if method in ("zcu", "zur") and sig.Ts > slow_log_s and not at_controller_rate:
         # The process noise on the governor's speed signal reaches c and ε unfiltered; logged below the
         # controller rate it aliases into the band as input noise (errors in variables), and the
