@@ -109,13 +109,13 @@ def test_meter_noise_at_15_minutes_the_droop_is_covered_over_seeds():
 def test_meter_noise_whose_effect_cannot_be_measured_withholds_the_droop():
     # the Kd = 0 unit B at 15 min with excitation, seed 2: at 0.1 % meter noise only 1 of 6 replicate refits
     # converges (the noise a random walk in y + G_J u), and the droop was published +0.032 pp off with
-    # ±0.027 pp; now it is withheld with the reason. The ideal log of the same record (floor ≈ 0.04 %, u's own
-    # content) keeps its droop.
+    # ±0.027 pp; now Z_cu's droop is withheld with the reason. The ideal log of the same record (floor
+    # ≈ 0.04 %, u's own content) keeps its droop.
     from fcrlive.analysis.identify import identify_signals
 
     t = zoo.truth("B-int-beuler-10Hz")
     noisy = zoo.signals("B-int-beuler-10Hz", "ctl-0.1pct", minutes=15.0, seed=2, excitation=True)
-    rep = identify_signals(noisy, rated_mw=t.rated_mw, kd=t.kd, h=t.H)
+    rep = identify_signals(noisy, rated_mw=t.rated_mw, kd=t.kd, h=t.H, method="zcu")
     assert rep.method == "zcu"
     assert rep.droop is not None and rep.droop.value is None and rep.g1_static is None
     assert "meter's noise" in rep.droop.reason and "could not be measured" in rep.droop.reason
@@ -124,5 +124,25 @@ def test_meter_noise_whose_effect_cannot_be_measured_withholds_the_droop():
     assert "meter's noise" not in (rep.max_abs_s.reason or "") + (rep.max_abs_g1.reason or "")
     ideal = zoo.signals("B-int-beuler-10Hz", "ctl-ideal", minutes=15.0, seed=2, excitation=True)
     rep_i = identify_signals(ideal, rated_mw=t.rated_mw, kd=t.kd, h=t.H)
-    assert rep_i.droop is not None and rep_i.droop.value is not None
+    assert rep_i.droop is not None and rep_i.droop.value is not None and rep_i.droop.method is None
     assert rep_i.droop.ci95[0] <= t.droop <= rep_i.droop.ci95[1]
+
+    # method auto gives the droop and G_1(0) of lowband on the same log instead, marked as such, with Z_cu's
+    # reason in a note; the peaks and G_p stay Z_cu's
+    auto = identify_signals(noisy, rated_mw=t.rated_mw, kd=t.kd, h=t.H)
+    low = identify_signals(noisy, rated_mw=t.rated_mw, kd=t.kd, h=t.H, method="lowband")
+    assert auto.method == "zcu" and auto.droop.method == "lowband" and auto.g1_static.method == "lowband"
+    assert (auto.droop.value, auto.droop.ci95) == (low.droop.value, low.droop.ci95)
+    assert auto.droop.ci95[0] <= t.droop <= auto.droop.ci95[1]
+    assert "droop" not in auto.not_identifiable
+    assert not any("meter's noise" in w for w in auto.warnings)
+    assert any(n.startswith("droop and G_1(0) from lowband") and "meter's noise" in n for n in auto.notes)
+    assert auto.max_abs_s == rep.max_abs_s and auto.gp == rep.gp and auto.max_abs_g1 == rep.max_abs_g1
+    # and says so wherever it is shown: the text summary and the published droop
+    from fcrlive.analysis.report import text_summary
+    from fcrlive.daemon.payloads import headline_scalars
+
+    line = next(x for x in text_summary(auto).splitlines() if x.startswith("effective droop"))
+    assert line.endswith("(from lowband)")
+    assert headline_scalars(auto)["droop"].method == "lowband"
+    assert headline_scalars(rep_i)["droop"].method is None

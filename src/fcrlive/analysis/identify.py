@@ -176,7 +176,47 @@ def identify_full(
         ni.update(ni_eiv)
     if note:
         rep = rep.model_copy(update={"notes": [*rep.notes, note]})
-    return replace(res, report=quality.withhold(rep, ni))
+    rep = quality.withhold(rep, ni)
+    H = h if h is not None else (plant.unit.swing.H if plant is not None else None)
+    if (rep.method == "zcu" and H is not None and rep.droop is not None and rep.droop.value is None
+            and not rep.method_reason.startswith("requested")):
+        rep = _droop_from_lowband(rep, signals, H=H, rated_mw=rated_mw, f0=f0, kd=kd, t_fme_s=t_fme_s,
+                                  peak_min_period_s=peak_min_period_s)
+    return replace(res, report=rep)
+
+
+def _droop_from_lowband(rep: IdentifyReport, signals, *, H: float, rated_mw, f0: float, kd: float,
+                        t_fme_s, peak_min_period_s: float) -> IdentifyReport:
+    """A Z_cu report whose droop is not identifiable, with the droop and G_1(0) of lowband on the same log
+    where lowband gives them (marked ``method="lowband"``, Z_cu's reason in a note); else unchanged.
+
+    Why: the Kd = 0 units at 0.1 % meter noise withhold Z_cu's droop (experiments.METER_MATERIAL_PCT), and a
+    plant owner then had to run the log again with ``--method lowband``. lowband's droop rests on the low
+    band, where the meter noise is small against the load's swings, and holds on these logs: on the zoo's
+    excited logs at the controller rate (7 plants × ctl-0.1pct/ctl-ideal × 15/30/60 min × 10 seeds) it was
+    covered 412/415 (5 withheld), B and G 60/60, median abs error 0.008 pp (docs/zoo.md)."""
+    try:
+        low = identify_full(signals, rated_mw=rated_mw, f0=f0, kd=kd, method="lowband", t_fme_s=t_fme_s,
+                            peak_min_period_s=peak_min_period_s, h=H).report
+    except (DataError, UserError):
+        return rep
+    if low.droop is None or low.droop.value is None:
+        return rep
+    why = rep.droop.reason or rep.not_identifiable.get("droop", "")
+    why = why.removeprefix(quality.NOT_IDENTIFIABLE + ": ")
+    why = why.split("; --method lowband")[0]
+    ni = {k: v for k, v in rep.not_identifiable.items() if k not in ("droop", "g1_static")}
+    dropped = {rep.not_identifiable.get("droop"), rep.not_identifiable.get("g1_static"), rep.droop.reason}
+    g1s = low.g1_static if low.g1_static is not None and low.g1_static.value is not None else None
+    note = (f"droop{' and G_1(0)' if g1s is not None else ''} from lowband on the same log (the low band, "
+            f"with the given H): Z_cu could not give it ({why})")
+    return rep.model_copy(update={
+        "droop": low.droop.model_copy(update={"method": "lowband"}),
+        "g1_static": None if g1s is None else g1s.model_copy(update={"method": "lowband"}),
+        "not_identifiable": ni,
+        "warnings": [w for w in rep.warnings if w not in dropped],
+        "notes": [*rep.notes, note],
+    })
 
 
 def _not_identifiable(res: Identification, *, kd: float = 0.0, t_fme_s: float | None = None,

@@ -35,6 +35,11 @@ class ValueCI(BaseModel):
     value: float | None
     ci95: Bounds = Field(description="[lower, upper], 95 % interval (null where unknown)")
     reason: str | None = Field(default=None, description="why value is null (not identifiable from this log)")
+    method: str | None = Field(
+        default=None,
+        description="the method that gave this value when it is not the report's own (e.g. lowband for the "
+        "droop of a Z_cu report whose own droop is not identifiable)",
+    )
 
 
 class PeakCI(ValueCI):
@@ -315,7 +320,7 @@ def _ci(v: ValueCI | None, fmt: str = "{:.4f}", scale: float = 1.0, unit: str = 
         s += f"  [{fmt.format(lo * scale)}, {fmt.format(hi * scale)}]"
     else:
         s += "  [interval unknown]"
-    return s + (f" {unit}" if unit else "")
+    return s + (f" {unit}" if unit else "") + (f"  (from {v.method})" if v.method else "")
 
 
 def _iv(lo: float | None, hi: float | None) -> str:

@@ -132,6 +132,8 @@ class ScalarPayload(_Payload):
     unit: str = ""
     reason: str | None = Field(None, description="why value is null (not identifiable from this window)")
     quality: QuantityQuality | None = Field(None, description="the quality rule's verdict on this number")
+    method: str | None = Field(None, description="the method that gave this number when it is not the "
+                                                 "identification's own (e.g. lowband for a Z_cu droop)")
 
 
 class TsoVerdictPayload(_Payload):
@@ -227,7 +229,8 @@ def _scalar(x: ValueCI | PeakCI, t: float, t2: float, unit: str, scale: float = 
         return ScalarPayload(t=t, window_end=t2, value=None, ci95=(None, None), unit=unit,
                              reason=x.reason or not_identifiable_reason)
     return ScalarPayload(t=t, window_end=t2, value=x.value * scale,
-                         ci95=(lo, hi), omega=x.omega if isinstance(x, PeakCI) else None, unit=unit)
+                         ci95=(lo, hi), omega=x.omega if isinstance(x, PeakCI) else None, unit=unit,
+                         method=x.method)
 
 
 def not_identifiable(r: IdentifyReport) -> dict[str, str]:
