@@ -101,7 +101,7 @@ def test_wide_quantities_null_with_reason_in_quantity_list_and_warnings():
     assert quality.withhold(out) is out
     # and the JSON says null, never NaN
     doc = out.to_json_dict()
-    assert doc["droop"] == {"value": None, "ci95": [None, None], "reason": out.droop.reason}
+    assert doc["droop"] == {"value": None, "ci95": [None, None], "reason": out.droop.reason, "method": None}
 
 
 def test_zur_not_converged_withholds_every_quantity_of_zur():
