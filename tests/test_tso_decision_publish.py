@@ -65,3 +65,18 @@ def test_text_summary_and_demo_show_undecided_with_the_margin_interval():
             for d in ("pass", "undecided", "pass")]
     lines = summary_lines(msgs, {"droop": 0.04}, 0.0, 1.0, 1.0)
     assert any(x.strip().startswith("FCR-D") and "PASS, UNDECIDED, PASS" in x for x in lines)
+
+
+def test_a_droop_from_another_method_says_so_on_every_surface():
+    # a Z_cu report whose droop came from lowband (analysis.identify._droop_from_lowband)
+    from fcrlive.analysis.report import ValueCI
+
+    r = report(method="zcu").model_copy(
+        update={"droop": ValueCI(value=0.045, ci95=(0.043, 0.047), method="lowband")})
+    msg = _payload(r).model_dump(mode="json")
+    assert "droop 4.50 [4.30, 4.70] % (from lowband)" in result_line(1, msg, 1.0)
+    assert result_topics(_payload(r))["droop"].method == "lowband"
+    line = next(x for x in text_summary(r).splitlines() if x.startswith("effective droop"))
+    assert "(from lowband)" in line
+    plain = _payload(report(method="zcu")).model_dump(mode="json")
+    assert "from " not in result_line(1, plain, 1.0)

@@ -120,7 +120,10 @@ def result_line(n: int, msg: dict, speed: float) -> str:
     per = rq.get("quantities") or {}
 
     def mark(key: str) -> str:
-        return " (uncertain)" if (per.get(key) or {}).get("level") == "uncertain" else ""
+        # a droop from another method than the window's (lowband in a Z_cu report) says so
+        other = (r.get(key) or {}).get("method")
+        return (f" (from {other})" if other else "") + (
+            " (uncertain)" if (per.get(key) or {}).get("level") == "uncertain" else "")
 
     return (f"{head}, method {r.get('method')}: droop {_fmt_ci(r.get('droop'), 100.0)} %{mark('droop')}, "
             f"max|S| {_fmt_ci(r.get('max_abs_s'))}{mark('max_abs_s')}, "
