@@ -115,7 +115,7 @@ def _fit(task: Task, logger: str, sig, tr, method: str, with_plant: bool, with_h
     q = {}
     d = getattr(rep, "droop", None)
     q["droop"] = [_entry(getattr(d, "value", None), getattr(d, "ci95", None), tr.droop)
-                  | {"reason": _reason(d)}]
+                  | {"reason": _reason(d), "method": getattr(d, "method", None)}]
     for key, attr, truth in (("max_s", "max_abs_s", tr.max_s), ("max_g1", "max_abs_g1", tr.max_g1)):
         pk = getattr(rep, attr, None)
         q[key] = [_entry(getattr(pk, "value", None), getattr(pk, "ci95", None), truth)
