@@ -130,7 +130,8 @@ def test_meter_noise_whose_effect_cannot_be_measured_withholds_the_droop():
     # method auto gives the droop and G_1(0) of lowband on the same log instead, marked as such, with Z_cu's
     # reason in a note; the peaks and G_p stay Z_cu's
     auto = identify_signals(noisy, rated_mw=t.rated_mw, kd=t.kd, h=t.H)
-    low = identify_signals(noisy, rated_mw=t.rated_mw, kd=t.kd, h=t.H, method="lowband")
+    # (with the plant description lowband knows the log is at the controller rate: r stays in its input)
+    low = identify_signals(noisy, rated_mw=t.rated_mw, kd=t.kd, h=t.H, method="lowband", plant=t.plant)
     assert auto.method == "zcu" and auto.droop.method == "lowband" and auto.g1_static.method == "lowband"
     assert (auto.droop.value, auto.droop.ci95) == (low.droop.value, low.droop.ci95)
     assert auto.droop.ci95[0] <= t.droop <= auto.droop.ci95[1]

@@ -195,9 +195,12 @@ def _droop_from_lowband(rep: IdentifyReport, signals, *, H: float, rated_mw, f0:
     band, where the meter noise is small against the load's swings, and holds on these logs: on the zoo's
     excited logs at the controller rate (7 plants × ctl-0.1pct/ctl-ideal × 15/30/60 min × 10 seeds) it was
     covered 412/415 (5 withheld), B and G 60/60, median abs error 0.008 pp (docs/zoo.md)."""
+    sigs = [signals] if isinstance(signals, PlantSignals) else list(signals)
     try:
-        low = identify_full(signals, rated_mw=rated_mw, f0=f0, kd=kd, method="lowband", t_fme_s=t_fme_s,
-                            peak_min_period_s=peak_min_period_s, h=H).report
+        # Z_cu ran: the log is at the controller rate, the excitation in ε the governor's own
+        low = quality.withhold(_identify_lowband(
+            merge_signals(sigs), H=H, kd=kd, rated=rep.rated_mw, f0=f0, reason=rep.method_reason,
+            t_fme_s=t_fme_s, peak_min_period_s=peak_min_period_s, excitation_in_input=True).report)
     except (DataError, UserError):
         return rep
     if low.droop is None or low.droop.value is None:
@@ -297,8 +300,10 @@ def _identify(
         return Identification(rep, a, exp)
     sig = merge_signals(sigs)
     if method == "lowband":
+        # the excitation in ε is the governor's own only on a log at its controller rate (lowband.lowband)
+        at_rate = plant is not None and sig.Ts <= 1.5 * plant.unit.governor.Tc
         return _identify_lowband(sig, H=H, kd=kd, rated=rated, f0=f0, reason=reason, t_fme_s=t_fme_s,
-                                 peak_min_period_s=peak_min_period_s)
+                                 peak_min_period_s=peak_min_period_s, excitation_in_input=at_rate)
     if method in ("zur", "zcu") and not sig.has_excitation:
         raise DataError(
             f"--method {method} needs an excitation (ApplFreqSig differing from GridFreq); "
@@ -392,12 +397,13 @@ max|G_1| is 0.5-1.1 (the zoo's truths: 12-36× G_1(0)); S rises from near 0."""
 _PEAK_RESPONSE = {"max_abs_g1": "G_1", "max_abs_s": "S"}
 
 
-def _identify_lowband(sig: PlantSignals, *, H, kd, rated, f0, reason, t_fme_s, peak_min_period_s
-                      ) -> Identification:
-    """The lowband experiment, assessed, with the peaks and G_p points gated by the coherence."""
+def _identify_lowband(sig: PlantSignals, *, H, kd, rated, f0, reason, t_fme_s, peak_min_period_s,
+                      excitation_in_input: bool = False) -> Identification:
+    """The lowband experiment, assessed, with the peaks and G_p points gated by the coherence.
+    ``excitation_in_input``: the log is known to be at the controller rate (lowband.lowband)."""
     if H is None:
         raise UserError("--method lowband needs the inertia constant H (--h or --plant)")
-    exp = lb.lowband(sig, H=float(H), kd=kd)
+    exp = lb.lowband(sig, H=float(H), kd=kd, excitation_in_input=excitation_in_input)
     a = assess(exp, kd=kd, t_fme_s=t_fme_s, peak_min_period_s=peak_min_period_s)
     diag = lb.diagnostics(sig)
     ni: dict[str, str] = {}
