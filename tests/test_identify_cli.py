@@ -55,7 +55,8 @@ def test_json_and_auto_method(files, case, capsys):
         assert doc["gp_kind"] == "G_req" and len(doc["gp"]) == 3
     if case in ("zcu", "zur"):
         # a reason exactly when the value is null (analysis.quality nulls a droop wider than itself, with why)
-        assert set(doc["droop"]) == {"value", "ci95", "reason"}
+        assert set(doc["droop"]) == {"value", "ci95", "reason", "method"}
+        assert doc["droop"]["method"] is None  # no H given: no droop from lowband in a Z_cu/Z_ur report
         assert (doc["droop"]["reason"] is None) == (doc["droop"]["value"] is not None)
     if case == "zcu":
         assert len(doc["gp"]) == 10

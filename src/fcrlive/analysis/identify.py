@@ -180,13 +180,13 @@ def identify_full(
     H = h if h is not None else (plant.unit.swing.H if plant is not None else None)
     if (rep.method == "zcu" and H is not None and rep.droop is not None and rep.droop.value is None
             and not rep.method_reason.startswith("requested")):
-        rep = _droop_from_lowband(rep, signals, H=H, rated_mw=rated_mw, f0=f0, kd=kd, t_fme_s=t_fme_s,
+        rep = _droop_from_lowband(rep, signals, H=H, f0=f0, kd=kd, t_fme_s=t_fme_s,
                                   peak_min_period_s=peak_min_period_s)
     return replace(res, report=rep)
 
 
-def _droop_from_lowband(rep: IdentifyReport, signals, *, H: float, rated_mw, f0: float, kd: float,
-                        t_fme_s, peak_min_period_s: float) -> IdentifyReport:
+def _droop_from_lowband(rep: IdentifyReport, signals, *, H: float, f0: float, kd: float, t_fme_s,
+                        peak_min_period_s: float) -> IdentifyReport:
     """A Z_cu report whose droop is not identifiable, with the droop and G_1(0) of lowband on the same log
     where lowband gives them (marked ``method="lowband"``, Z_cu's reason in a note); else unchanged.
 
