@@ -177,12 +177,17 @@ def identify_full(
     if note:
         rep = rep.model_copy(update={"notes": [*rep.notes, note]})
     rep = quality.withhold(rep, ni)
-    H = h if h is not None else (plant.unit.swing.H if plant is not None else None)
+    H = _inertia(h, plant)
     if (rep.method == "zcu" and H is not None and rep.droop is not None and rep.droop.value is None
             and not rep.method_reason.startswith("requested")):
         rep = _droop_from_lowband(rep, signals, H=H, f0=f0, kd=kd, t_fme_s=t_fme_s,
                                   peak_min_period_s=peak_min_period_s)
     return replace(res, report=rep)
+
+
+def _inertia(h: float | None, plant) -> float | None:
+    """H [s] on the machine base: ``h`` when given, else the plant description's, else None (unknown)."""
+    return h if h is not None else (plant.unit.swing.H if plant is not None else None)
 
 
 def _droop_from_lowband(rep: IdentifyReport, signals, *, H: float, f0: float, kd: float, t_fme_s,
@@ -270,7 +275,7 @@ def _identify(
     if method not in METHODS:
         raise UserError(f"unknown method {method!r}; use one of {', '.join(METHODS)}")
     rated = float(rated_mw if rated_mw is not None else sigs[0].rated_mw)
-    H = h if h is not None else (plant.unit.swing.H if plant is not None else None)
+    H = _inertia(h, plant)
     tc = plant.unit.governor.Tc if plant is not None else None
     auto_method, auto_reason = choose_method(sigs, h_known=H is not None, controller_ts=tc)
     if method == "auto":
