@@ -79,18 +79,19 @@ def test_jacobian_of_the_shared_static_matches_finite_differences(p_s, q, n):
 
 
 def test_known_swing_pole_of_a_unit_without_damping():
-    """zcu_swing: G_J = 1/(2Hs) known (q = 1); G_jp's pole at the search's guard (1 − 1e-5) or at 1 − 1e-7
-    gives the same static G_jp/G_J, which the unshared evaluation at ω = 1e-7 rad/s does not."""
+    """zcu_swing holds G_jp's swing pole at G_J's (q = 1 for Kd = 0): G_jp = G_t/(1 − q z⁻¹). At the
+    droop's ω = 1e-7 rad/s, G_jp/G_J = G_t (2H jω)/(1 − e^{−jωTs}) → G_t 2H/Ts, which
+    experiments.swing_pole keeps to full precision (1 − e^{−jωTs} by expm1): against the series
+    jx/(1 − e^{−jx}) = 1 + jx/2 − x²/12 + O(x⁴)."""
     H = 4.0
-    vals = []
-    for p_s in (1 - 1e-5, 1 - 1e-7):
-        m = loop_model(p_s, 0.5)
-        w = np.array([1e-7])
-        g = ex._gjp_shared_value(m, w, q=1.0)[0] * (2 * H * 1j * w[0])
-        vals.append(g)
-        unshared = m.freqresp(w, 0).value[0] * (2 * H * 1j * w[0])
-        assert abs(unshared / g - 1) > 0.1
-    assert vals[0] == pytest.approx(vals[1], rel=1e-6)
+    for w0 in (1e-7, 1e-9):
+        x = w0 * TS
+        ratio = ex.swing_pole(np.array([w0]), TS, 1.0)[0] * (2 * H * 1j * w0)
+        assert ratio == pytest.approx(2 * H / TS * (1 + 0.5j * x - x * x / 12), rel=1e-13)
+    # q < 1: the same expression as the plain one (no cancellation there)
+    w = np.array([1e-7, 0.3])
+    np.testing.assert_allclose(ex.swing_pole(w, TS, 0.97), 1.0 / (1.0 - 0.97 * np.exp(-1j * w * TS)),
+                               rtol=1e-12)
 
 
 def test_ten_minute_record_with_swing_poles_at_0_9999():

@@ -74,6 +74,8 @@ class _Struct:
     nk: tuple[int, ...]
     ic: bool = False
     """Estimate each experiment's initial state and output offset (variable projection)."""
+    drift_pole: float | None = None
+    """With ``ic``: also the step response of 1/(1 − p q⁻¹) per experiment (p = 1: a linear trend)."""
 
     @property
     def nu(self) -> int:
@@ -408,8 +410,13 @@ class _IcProjection:
             resp.append((_filt(_ONE, C, _unit_impulse(L)), mc))
         # Fortran order: the columns are written one by one and the QR/SVD take their input column-major
         # (a C-order matrix costs them a transposing copy); the values are the same
-        Phi = np.empty((L, 1 + sum(m for _, m in resp)), order="F")
+        drift = st.drift_pole is not None
+        Phi = np.empty((L, 1 + sum(m for _, m in resp) + drift), order="F")
         Phi[:, 0] = 1.0
+        if drift:
+            # last, so that the impulse columns keep the indices kaufman reads their coefficients from;
+            # it does not depend on θ: no Kaufman term
+            Phi[:, -1] = _filt(_ONE, np.array([1.0, -float(st.drift_pole)]), np.ones(L))
         c = 1
         for h, m in resp:
             # the responses to impulses at t = 0 .. m−1 of a filter starting from rest are delayed copies
@@ -892,7 +899,8 @@ def _perturbed(st: _Struct, th: np.ndarray, rng: np.random.Generator) -> np.ndar
 
 
 # ===================================================================== public estimators
-def _check_orders(data: IdData, nb, nc, nd, nf, nk, method: str, ic: str = "zero") -> _Struct:
+def _check_orders(data: IdData, nb, nc, nd, nf, nk, method: str, ic: str = "zero",
+                  drift_pole: float | None = None) -> _Struct:
     nu = data.nu
     nb = per_input(nb, nu, "nb")
     nf = per_input(nf, nu, "nf")
@@ -908,7 +916,12 @@ def _check_orders(data: IdData, nb, nc, nd, nf, nk, method: str, ic: str = "zero
             )
     if ic not in ("zero", "estimate"):
         raise ValueError(f"ic = {ic!r}: use 'zero' or 'estimate'")
-    st = _Struct(nb, nc, nd, nf, nk, ic == "estimate")
+    if drift_pole is not None:
+        if ic != "estimate":
+            raise ValueError("drift_pole needs ic='estimate' (it is one more column of that projection)")
+        if not 0.0 <= drift_pole <= 1.0:
+            raise ValueError(f"drift_pole = {drift_pole}: must be in [0, 1]")
+    st = _Struct(nb, nc, nd, nf, nk, ic == "estimate", None if drift_pole is None else float(drift_pole))
     return st
 
 
@@ -1215,7 +1228,8 @@ def _sandwich(J: np.ndarray, eps: np.ndarray, bounds) -> np.ndarray:
 def bj(data: IdData, nb: int | Sequence[int], nc: int, nd: int, nf: int | Sequence[int],
        nk: int | Sequence[int] = 1, *, init: PolyModel | None = None, multistart: bool | str = "auto",
        n_high: int | None = None, maxiter: int = 100, tol: float = 1e-10, seed: int = 0,
-       ic: str = "zero", covariance: str = "gauss", beat: float | None = None) -> PolyModel:
+       ic: str = "zero", covariance: str = "gauss", beat: float | None = None,
+       drift_pole: float | None = None) -> PolyModel:
     """Box-Jenkins model y = Σ B_i/F_i u_i + C/D e by prediction-error minimisation.
 
     Args:
@@ -1232,6 +1246,11 @@ def bj(data: IdData, nb: int | Sequence[int], nc: int, nd: int, nf: int | Sequen
         ic: "zero" (every filter starts from rest) or "estimate" (each experiment's initial states and an
             output offset are estimated by variable projection; use it for records that do not start at
             rest, above all with slow poles).
+        drift_pole: with ``ic="estimate"``, also a drift per experiment: the response of 1/(1 − p q⁻¹)
+            to a step (p = 1: a linear trend). For an output that integrates (through a KNOWN pole p that
+            the caller has applied to the input) a constant offset the model cannot see: a unit without
+            damping (Kd = 0) turns a constant power mismatch into a ramp of its speed
+            (:func:`fcrlive.analysis.experiments.zcu_swing`).
         covariance: "gauss" (λ̂(JᵀJ)⁻¹, white residuals) or "sandwich" (Newey-West HAC,
             (JᵀJ)⁻¹ [Σ_τ w_τ Σ_n ψ[n]ε[n]ε[n−τ]ψ[n−τ]ᵀ] (JᵀJ)⁻¹, honest with coloured residuals:
             Ljung 1999, §9.3).
@@ -1243,7 +1262,7 @@ def bj(data: IdData, nb: int | Sequence[int], nc: int, nd: int, nf: int | Sequen
     Returns:
         PolyModel with covariance λ̂(JᵀJ)⁻¹ and a report (iterations, loss, stop reason, start losses).
     """
-    st = _check_orders(data, nb, nc, nd, nf, nk, "bj", ic)
+    st = _check_orders(data, nb, nc, nd, nf, nk, "bj", ic, drift_pole)
     return _pem(data, st, "bj", init=init, multistart=multistart, n_high=n_high, maxiter=maxiter, tol=tol,
                 seed=seed, covariance=covariance, beat=beat)
 
@@ -1251,13 +1270,13 @@ def bj(data: IdData, nb: int | Sequence[int], nc: int, nd: int, nf: int | Sequen
 def oe(data: IdData, nb: int | Sequence[int], nf: int | Sequence[int], nk: int | Sequence[int] = 1, *,
        init: PolyModel | None = None, multistart: bool | str = "auto", n_high: int | None = None,
        maxiter: int = 100, tol: float = 1e-10, seed: int = 0, ic: str = "zero",
-       covariance: str = "gauss", beat: float | None = None) -> PolyModel:
+       covariance: str = "gauss", beat: float | None = None, drift_pole: float | None = None) -> PolyModel:
     """Output-error model y = Σ B_i/F_i u_i + e (a BJ model with C = D = 1). Arguments as :func:`bj`.
 
     The covariance λ̂(JᵀJ)⁻¹ assumes white output noise; with coloured noise OE stays consistent in
     open loop but that covariance is not the true one: use ``covariance="sandwich"`` (or bj).
     """
-    st = _check_orders(data, nb, 0, 0, nf, nk, "oe", ic)
+    st = _check_orders(data, nb, 0, 0, nf, nk, "oe", ic, drift_pole)
     return _pem(data, st, "oe", init=init, multistart=multistart, n_high=n_high, maxiter=maxiter, tol=tol,
                 seed=seed, covariance=covariance, beat=beat)
 

@@ -1,0 +1,96 @@
+"""Z_cu with the data sheet's swing equation holds G_jp's swing pole where Kd = 0 (experiments.SwingPole):
+on the zoo's units without damping (B, G) the fit of G_t = servo × turbine is a converged minimum, and the
+same log gives the same published numbers under two BLAS kernels.
+
+Before, G_jp's swing pole was fitted and pressed against the stability guard on most excited logs of B and G
+(31 of 40 main fits); where such a search stopped depended on the rounding of the arithmetic:
+Haswell vs Sandybridge kernels, B and G, ideal and 0.1 % meter noise, excited, 15/30 min, 5 seeds: 227 of
+1341 published numbers differed by more than 1e-4 relative, 43 by more than 1 % (docs/zoo.md)."""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import subprocess
+import sys
+
+import pytest
+
+from fcrlive.analysis import experiments as ex
+from fcrlive.sim import zoo
+
+B = "B-int-beuler-10Hz"
+G = "G-classic-fwd-40Hz-poor"
+
+
+@pytest.mark.parametrize("plant,seed", [(B, 4), (B, 6), (G, 4), (G, 6)])
+def test_the_turbine_path_of_a_unit_without_damping_converges(plant, seed):
+    """Records whose fitted swing pole stalled at the guard (the G_jp fit with the pole free did not
+    converge on any of them); the held pole with the drift column converges on each."""
+    tr = zoo.truth(plant)
+    sig = zoo.signals(plant, "ctl-ideal", minutes=15, excitation=True, seed=seed)
+    res = ex.zcu_swing(sig, H=tr.H, kd=tr.kd, jackknife=False, rate_check=False, delay_check=False,
+                       meter_check=False)
+    m = res.models["y+G_J u<-G_J c"]
+    assert m.report.converged, m.report.stop_reason
+    assert m.nf == (2,)  # servo × turbine: the swing pole is not a parameter
+    assert any("pole held (Kd = 0)" in n for n in res.notes)
+
+
+_CHILD = r"""
+import json, pickle, sys
+from threadpoolctl import threadpool_info
+from fcrlive.analysis.identify import identify_signals
+
+archs = sorted({i.get("architecture") or "" for i in threadpool_info() if i.get("internal_api") == "openblas"})
+rows = []
+for sig, kw in pickle.load(open(sys.argv[1], "rb")):
+    rep = identify_signals(sig, **kw)
+    nums = []
+    for key in ("droop", "max_abs_s", "max_abs_g1"):
+        q = getattr(rep, key)
+        nums.append(None if q is None else [q.value, *(q.ci95 or [None, None])])
+    nums.append([[p.abs, *(p.abs_ci95 or [None, None])] for p in (rep.gp or [])])
+    rows.append(nums)
+print(json.dumps({"archs": archs, "rows": rows}))
+"""
+
+
+def _identify_under(kernel: str, path) -> dict:
+    env = {**os.environ, "OPENBLAS_CORETYPE": kernel, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    out = subprocess.run([sys.executable, "-c", _CHILD, str(path)], env=env, capture_output=True, text=True,
+                         timeout=600, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _flat(x) -> list:
+    if isinstance(x, list):
+        return [v for e in x for v in _flat(e)]
+    return [x]
+
+
+def test_the_same_log_gives_the_same_numbers_under_two_blas_kernels(tmp_path):
+    """B at 0.1 % meter noise, 15 min, seed 1: max|S| 1.519 [1.216, 1.822] under one kernel and
+    [1.012, 2.025] under the other before (the delay check then withheld it under one only); G seed 3:
+    jackknife refits 0.3 % apart. Now every published number agrees to 1e-4 relative (the project's
+    standard, ../shared/tools/blas-determinism; what is left is the searches' stopping tolerance)."""
+    cases = []
+    for plant, seed in ((B, 1), (G, 3)):
+        tr = zoo.truth(plant)
+        sig = zoo.signals(plant, "ctl-0.1pct", minutes=15, excitation=True, seed=seed)
+        cases.append((sig, {"rated_mw": tr.rated_mw, "kd": tr.kd, "h": tr.H}))
+    path = tmp_path / "logs.pkl"
+    path.write_bytes(pickle.dumps(cases))
+    a = _identify_under("Haswell", path)
+    b = _identify_under("Sandybridge", path)
+    if a["archs"] != ["Haswell"] or b["archs"] != ["Sandybridge"]:
+        pytest.skip(f"this machine's OpenBLAS did not take both kernels: {a['archs']} / {b['archs']}")
+    assert len(a["rows"]) == 2
+    for ra, rb in zip(a["rows"], b["rows"]):
+        fa, fb = _flat(ra), _flat(rb)
+        assert [x is None for x in fa] == [x is None for x in fb]  # shown under both or withheld under both
+        assert sum(x is not None for x in fa) >= 6
+        for x, y in zip(fa, fb):
+            if x is not None:
+                assert y == pytest.approx(x, rel=1e-4)
