@@ -43,7 +43,8 @@ import json, pickle, sys
 from threadpoolctl import threadpool_info
 from fcrlive.analysis.identify import identify_signals
 
-archs = sorted({i.get("architecture") or "" for i in threadpool_info() if i.get("internal_api") == "openblas"})
+archs = sorted({i.get("architecture") or "" for i in threadpool_info()
+                if i.get("internal_api") == "openblas"})
 rows = []
 for sig, kw in pickle.load(open(sys.argv[1], "rb")):
     rep = identify_signals(sig, **kw)
