@@ -890,6 +890,31 @@ class SwingPole:
         return _gjp(m, w, self.q(m.Ts)) if self.held else _gjp_shared(m, w, self.q(m.Ts))
 
 
+TURBINE_TAU_MAX_S = 30.0
+"""Slowest time constant [s] of a fitted turbine path G_t = servo × turbine (a held swing pole,
+:class:`SwingPole`) that is taken for one: a hydro unit's servo and turbine are fractions of a second to a
+few seconds (Tg, Tw/2). Slower, the fit follows the power meter's noise, which the swing of a unit without
+damping integrates into a random walk of y + G_J u, with a pole-zero pair near z = 1; the peaks and G_p
+then depend on it (:func:`_slow_turbine_path`). Measured on the zoo's B and G (excited, controller rate,
+15/30/60 min, 6 seeds): the slowest pole 0.27-12 s on every ideal log, 68-3000 s (or at the guard) on
+25 of 36 logs at 0.1 % meter noise, whose max abs S and max abs G_1 missed on 4 of 12 shown (10 seeds)."""
+
+
+def _slow_turbine_path(m: PolyModel, sw: SwingPole) -> str | None:
+    """The reason the peaks and G_p are not identifiable when the held-pole fit's turbine path ``m`` has a
+    pole slower than :data:`TURBINE_TAU_MAX_S` (None otherwise, and for a fitted swing pole)."""
+    if not sw.held:
+        return None
+    r = float(np.max(np.abs(np.roots(m.f[0])))) if len(m.f[0]) > 1 else 0.0
+    tau = np.inf if r >= 1.0 else (-m.Ts / np.log(r) if r > 0 else 0.0)
+    if not tau > TURBINE_TAU_MAX_S:
+        return None
+    t = "at the stability guard" if not np.isfinite(tau) else f"with a time constant of {tau:.0f} s"
+    return (f"not identifiable from this log: the fitted servo × turbine path has a pole {t} (a "
+            "turbine's are seconds): it follows the power meter's noise, a random walk through the swing of "
+            "a unit without damping (Kd = 0), and max|S|, max|G_1| and G_p depend on it")
+
+
 def _swing_search(d: IdData, nb: int, nf: int, Ts: float, sw: SwingPole) -> PolyModel | None:
     """OE of G_jp's fitted part (:class:`SwingPole`) from physical starts: the swing pole from the data
     sheet where it is fitted, servo and turbine poles from :data:`SWING_STARTS_S`, numerators by least
@@ -1078,6 +1103,10 @@ def zcu_swing(
           if delay_check else {})
     if meter_why is not None:
         ni["droop"] = meter_why
+    slow_why = _slow_turbine_path(m_cu, sw)
+    if slow_why is not None:
+        for key in ("max_abs_s", "max_abs_g1", "gp", "tso"):
+            ni[key] = slow_why
     return ExperimentResult(
         "zcu", prep.Ts, d.N, prep.duration_s, {sw.model_key: m_cu, "a<-c": m_ca}, responses,
         ("G_1", "S", "G_p"), ctl, val, tuple(warns), tuple(notes), ni,
