@@ -965,13 +965,12 @@ def zcu_swing(
     the rounding of the arithmetic: Haswell vs Sandybridge kernels, the zoo's excited logs at the
     controller rate (ideal and 0.1 % meter noise, 15/30 min, 5 seeds), B and G: 227 of 1341 published
     numbers differed by more than 1e-4 relative, 43 by more than 1 %, one G_p point was shown under one
-    kernel only; held: 11 by more than 1e-4, none by 1 %, none so. Held without the ramp, 21 of 64 fits
+    kernel only; held (with :data:`TURBINE_TAU_MAX_S`): none of 1113. Held without the ramp, 21 of 64 fits
     of B and G (ideal and 0.1 %, 15/30 min, 8 seeds) did not converge, ending with a pole-zero pair at z =
     1 and the static gain off by up to 99 %; with it, 7 (6 of them at 0.1 % meter noise, the pair then
-    fitting the noise's random walk G_J n; there the kernels still differ by up to 2e-3 in interval
-    ends). Accuracy on those logs (median abs error of max|S|, fitted → held): B ideal 15/30 min 2.5/1.4
-    → 1.3/0.7 %, G 2.9/8.7 → 0.6/2.6 %; worse where the meter noise's random walk dominates w's low band
-    (B at 0.1 %, the intervals covering; docs/zoo.md).
+    fitting the noise's random walk G_J n: :data:`TURBINE_TAU_MAX_S`). On those logs (10 seeds, 15/30/60
+    min), fitted → held: max|S| covered 70/71 → 76/76, max|G_1| 75/76 → 81/81; median abs error of max|S|
+    on the ideal logs B 1.6/1.4/4.5 → 0.6/0.7/0.9 %, G 2.7/1.1/2.2 → 1.1/1.7/1.4 % (docs/zoo.md).
 
     Known limit: the causal anti-aliasing filter spreads each process-noise sample over several decimated
     samples, which the controller has already reacted to, so the decimated
