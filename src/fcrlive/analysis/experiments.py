@@ -846,8 +846,8 @@ class SwingPole:
     the pole shared with G_J's (:func:`_gjp_shared`). Why not held for every unit: on the zoo's 30- and
     60-min excited logs of F (PID, droop around it, Kd = 0.5) the held fit moved max abs S +6 … +7 % with
     ±1.5 % intervals that the delay check no longer withheld (4 records outside by 2-3.4 half-widths),
-    while the fitted pole of Kd > 0 units gave the same numbers under both BLAS kernels to 1e-4 but for
-    tolerance-level differences (docs/zoo.md)."""
+    while with the fitted pole no published number of a Kd > 0 unit differs by 1e-4 between BLAS kernels
+    (the zoo's excited controller-rate logs; docs/zoo.md)."""
 
     H: float
     kd: float
@@ -1235,7 +1235,8 @@ JACKKNIFE_MAXITER = 100
 iterations away). At 30, the refits of the Kd = 0 units at 0.1 % meter noise that had not converged by
 then ended where the rounding had taken them: B and G, 15/30 min, 5 seeds, Haswell vs Sandybridge kernel,
 11 of 717 published numbers (interval ends) differed by more than 1e-4 relative, up to 1.7e-3; at 100, 2,
-up to 1.9e-4, in the same CPU time (most refits converge in a few iterations)."""
+up to 1.9e-4. CPU: the same on those logs; Z_cu with H on the paper plant's 30-min 50 Hz record 1.30 →
+1.51 s (most refits converge in a few iterations, some there ran to 30)."""
 JACKKNIFE_T_FACTOR = 2.5706 / 1.96
 """t(5, 0.975)/z(0.975): the jackknife sd of 6 blocks has 5 degrees of freedom; the intervals are made
 as z × sd, so the sd is scaled to give the t interval."""
@@ -1308,7 +1309,8 @@ def _rate_check_fit(
 ) -> PolyModel | None:
     """G_jp fitted as in :func:`zcu_swing` (its part that ``sw`` fits), on the same log decimated to
     ``ts_id``/2, or None (with a note) where the log is not fast enough or the fit fails. ``start``: the
-    fit at ``ts_id``, whose poles start one search at the faster rate (the physical starts if that fails).
+    fit at ``ts_id``, whose poles start one search at the faster rate; the physical starts search too, and
+    the lowest loss is kept.
 
     Why: the closed-loop bias of G_jp (the decimated process noise correlated with past c, see
     :func:`zcu_swing`) grows with the identification's sample time and with the frequency, where the
@@ -1333,8 +1335,7 @@ def _rate_check_fit(
         d2 = sw.data(prep2)
         m = None
         if start is not None:
-            # one search from the slow fit's poles moved to the fast rate (z → z^(Ts2/Ts)): the physical
-            # starts cost 5 searches on twice the samples
+            # one search from the slow fit's poles moved to the fast rate (z → z^(Ts2/Ts))
             with contextlib.suppress(IdentError, ValueError, np.linalg.LinAlgError):
                 r = np.roots(start.f[0]).astype(complex)
                 # a real negative pole (a Nyquist-rate oscillation, fitted noise) has no counterpart at the
