@@ -75,7 +75,9 @@ def test_the_same_log_gives_the_same_numbers_under_two_blas_kernels(tmp_path):
     """B at 0.1 % meter noise, 15 min, seed 1: max|S| 1.519 [1.216, 1.822] under one kernel and
     [1.012, 2.025] under the other before (the delay check then withheld it under one only); G seed 3:
     jackknife refits 0.3 % apart. Now every published number agrees to 1e-4 relative (the project's
-    standard, ../shared/tools/blas-determinism; what is left is the searches' stopping tolerance)."""
+    standard, ../shared/tools/blas-determinism; what is left is the searches' stopping tolerance), and what
+    is withheld is withheld under both (B's peaks and G_p: its turbine path follows the meter noise,
+    experiments.TURBINE_TAU_MAX_S; its droop is shown)."""
     cases = []
     for plant, seed in ((B, 1), (G, 3)):
         tr = zoo.truth(plant)
@@ -88,13 +90,16 @@ def test_the_same_log_gives_the_same_numbers_under_two_blas_kernels(tmp_path):
     if a["archs"] != ["Haswell"] or b["archs"] != ["Sandybridge"]:
         pytest.skip(f"this machine's OpenBLAS did not take both kernels: {a['archs']} / {b['archs']}")
     assert len(a["rows"]) == 2
+    shown = 0
     for ra, rb in zip(a["rows"], b["rows"]):
         fa, fb = _flat(ra), _flat(rb)
         assert [x is None for x in fa] == [x is None for x in fb]  # shown under both or withheld under both
-        assert sum(x is not None for x in fa) >= 6
+        assert sum(x is not None for x in fa) >= 3  # the droop and its interval at least
+        shown += sum(x is not None for x in fa)
         for x, y in zip(fa, fb):
             if x is not None:
                 assert y == pytest.approx(x, rel=1e-4)
+    assert shown >= 30  # G's peaks and G_p points as well
 
 
 def test_a_turbine_path_that_follows_the_meter_noise_withholds_the_peaks():
