@@ -859,6 +859,10 @@ class SwingPole:
     def q(self, Ts: float) -> float:
         return float(np.exp(-self.kd * Ts / (2.0 * self.H)))
 
+    def G_J(self, omega: np.ndarray) -> np.ndarray:
+        """G_J(jω) = 1/(2H jω + Kd) at ω [rad/s] (continuous: the data sheet's swing equation)."""
+        return 1.0 / (2.0 * self.H * 1j * np.asarray(omega, float) + self.kd)
+
     @property
     def orders(self) -> tuple[tuple[int, int], ...]:
         """(nb, nf) candidates of the fitted part (G_t held, G_jp otherwise)."""
@@ -927,10 +931,11 @@ def _swing_search(d: IdData, nb: int, nf: int, Ts: float, sw: SwingPole,
     best = None
     for t_s, t_t in SWING_STARTS_S:
         f = np.poly(sw.start_poles(Ts, t_s, t_t, nf)).real
-        b = beat if best is None else best.report.loss if beat is None else min(beat, best.report.loss)
+        known = [x for x in (beat, None if best is None else best.report.loss) if x is not None]
         try:
             init = _ls_init(d, [f], [nb], [1])
-            m = oe(d, nb, nf, 1, init=init, multistart=False, beat=b, **sw.fit_kw(Ts), **FIT)
+            m = oe(d, nb, nf, 1, init=init, multistart=False, beat=min(known, default=None), **sw.fit_kw(Ts),
+                   **FIT)
         except (IdentError, ValueError, np.linalg.LinAlgError):
             continue
         if best is None or d.N * np.log(best.report.loss / m.report.loss) > 1e-2:
@@ -1050,19 +1055,17 @@ def zcu_swing(
     m_ca = _fit("a ← c", oe, d_ca, 2, 1, 0, **FIT)
     ctl = controller
 
-    G_J_of = lambda w: 1.0 / (2.0 * H * 1j * w + kd)  # noqa: E731
-
     controller_of = _controller_of(ctl, m_ca)
 
     jk = _swing_jackknife(d, m_cu, sw) if jackknife else []
     fast = _rate_check_fit(sig_w, prep, ts_id, o_best, sw, notes, m_cu) if rate_check else None
-    meter, meter_why = (_meter_replicates(signals, sig_w, d, m_cu, H, kd, ts_id, notes, sw)
+    meter, meter_why = (_meter_replicates(signals, sig_w, d, m_cu, ts_id, notes, sw)
                         if meter_check else ([], None))
 
     def responses(omega) -> dict[str, FreqResp]:
         w = np.atleast_1d(np.asarray(omega, float))
         G_jp = sw.freqresp(m_cu, w) * model_error(w)
-        G_J = FreqResp.known(w, G_J_of(w))
+        G_J = FreqResp.known(w, sw.G_J(w))
         G_s = m_ca.freqresp(w, 0)
         C = controller_of(w, G_s)
         L = G_jp * C
@@ -1100,7 +1103,7 @@ def zcu_swing(
     else:
         notes.append(f"jackknife of G_jp not possible ({len(jk)} of {JACKKNIFE_BLOCKS} refits succeeded): "
                      "intervals from the covariance alone")
-    ni = (_delay_check(d, m_cu, o_best, responses, controller_of, G_J_of, prep.Ts, notes, sw)
+    ni = (_delay_check(d, m_cu, o_best, responses, controller_of, prep.Ts, notes, sw)
           if delay_check else {})
     if meter_why is not None:
         ni["droop"] = meter_why
@@ -1176,9 +1179,8 @@ def meter_noise_std(u: np.ndarray, Ts: float) -> float:
     return float(np.sqrt(floor / (2.0 * Ts))) if np.isfinite(floor) and floor > 0 else 0.0
 
 
-def _meter_replicates(signals: PlantSignals, sig_w: PlantSignals, d: IdData, m: PolyModel, H: float,
-                      kd: float, ts_id: float, notes: list[str],
-                      sw: SwingPole) -> tuple[list[PolyModel], str | None]:
+def _meter_replicates(signals: PlantSignals, sig_w: PlantSignals, d: IdData, m: PolyModel, ts_id: float,
+                      notes: list[str], sw: SwingPole) -> tuple[list[PolyModel], str | None]:
     """G_jp's fitted part (``m`` on ``d``, :class:`SwingPole`) refitted :data:`METER_REPLICATES` times on
     w* = y + G_J (u + n*), n* white with the std of u's
     high-frequency floor (:func:`meter_noise_std`), each from the fit ``m`` (a fixed generator: the same
@@ -1202,7 +1204,7 @@ def _meter_replicates(signals: PlantSignals, sig_w: PlantSignals, d: IdData, m: 
     start = _pulled_in(m)
     for _ in range(METER_REPLICATES):
         n = rng.standard_normal(len(signals.u)) * (sigma * METER_SCALE)
-        w_star = swing_removed(replace(signals, u=np.asarray(signals.u, float) + n), H, kd)
+        w_star = swing_removed(replace(signals, u=np.asarray(signals.u, float) + n), sw.H, sw.kd)
         try:
             y_star = prepare(replace(sig_w, y=w_star), ts_id=ts_id, names=("y",)).signals["y"]
             d_star = IdData(y_star, d.u, Ts=d.Ts, output_name=d.output_name, input_names=d.input_names,
@@ -1216,7 +1218,7 @@ def _meter_replicates(signals: PlantSignals, sig_w: PlantSignals, d: IdData, m: 
         notes.append(f"meter-noise replicates not possible ({len(out)} of {METER_REPLICATES} refits)")
         if not pct >= METER_MATERIAL_PCT:
             return [], None
-        walk = " (Kd = 0: G_J an integrator, the noise a random walk in it)" if kd == 0 else ""
+        walk = " (Kd = 0: G_J an integrator, the noise a random walk in it)" if sw.held else ""
         return [], (f"not identifiable from this log: the power meter's noise (≈ {pct:.2g} % of rated) "
                     f"reaches y + G_J u{walk} and its effect on the droop could not be measured ({len(out)} "
                     f"of {METER_REPLICATES} refits with another draw of it converged); --method lowband "
@@ -1503,7 +1505,7 @@ def _loop_delay_check(d: IdData, m: PolyModel, responses: Responses, controller_
 
 
 def _delay_check(d: IdData, m: PolyModel, order: tuple[int, int], responses: Responses, controller_of,
-                 G_J_of, Ts: float, notes: list[str], sw: SwingPole) -> dict[str, str]:
+                 Ts: float, notes: list[str], sw: SwingPole) -> dict[str, str]:
     """``not_identifiable`` entries when max|S| or max|G_1| depend on the assumed input delay of G_jp.
 
     G_jp is refitted with one more sample of delay (nk = 2, from the fit with its numerator delayed).
@@ -1523,7 +1525,7 @@ def _delay_check(d: IdData, m: PolyModel, order: tuple[int, int], responses: Res
 
     def loop2(w):
         w = np.atleast_1d(np.asarray(w, float))
-        return _loop_values(sw.value(m2, w), controller_of(w).value, G_J_of(w))
+        return _loop_values(sw.value(m2, w), controller_of(w).value, sw.G_J(w))
 
     ni, seen = _delay_compare(responses, loop2, m.nk[0], Ts, w_hi, DELAY_CHECK_SHIFT)
     dl = d.N * np.log(m2.report.loss / m.report.loss)
