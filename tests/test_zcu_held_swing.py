@@ -74,14 +74,15 @@ def _flat(x) -> list:
 def test_the_same_log_gives_the_same_numbers_under_two_blas_kernels(tmp_path):
     """B at 0.1 % meter noise, 15 min, seed 1: max|S| 1.519 [1.216, 1.822] under one kernel and
     [1.012, 2.025] under the other before (the delay check then withheld it under one only); G seed 3:
-    jackknife refits 0.3 % apart. Now every published number agrees to 1e-4 relative (the project's
-    standard, ../shared/tools/blas-determinism; what is left is the searches' stopping tolerance), and what
-    is withheld is withheld under both (B's peaks and G_p: its turbine path follows the meter noise,
-    experiments.TURBINE_TAU_MAX_S; its droop is shown)."""
+    jackknife refits 0.3 % apart (at 0.1 % meter noise; since the block means its peaks are withheld
+    there, its ideal log is the one with them). Now every published number agrees to 1e-4 relative (the
+    project's standard, ../shared/tools/blas-determinism; what is left is the searches' stopping
+    tolerance), and what is withheld is withheld under both (B's peaks and G_p: its turbine path follows
+    the meter noise, experiments.TURBINE_TAU_MAX_S; its droop is shown)."""
     cases = []
-    for plant, seed in ((B, 1), (G, 3)):
+    for plant, seed, logger in ((B, 1, "ctl-0.1pct"), (G, 3, "ctl-ideal")):
         tr = zoo.truth(plant)
-        sig = zoo.signals(plant, "ctl-0.1pct", minutes=15, excitation=True, seed=seed)
+        sig = zoo.signals(plant, logger, minutes=15, excitation=True, seed=seed)
         cases.append((sig, {"rated_mw": tr.rated_mw, "kd": tr.kd, "h": tr.H}))
     path = tmp_path / "logs.pkl"
     path.write_bytes(pickle.dumps(cases))
@@ -102,22 +103,25 @@ def test_the_same_log_gives_the_same_numbers_under_two_blas_kernels(tmp_path):
     assert shown >= 30  # G's peaks and G_p points as well
 
 
-def test_a_turbine_path_that_follows_the_meter_noise_withholds_the_peaks():
-    """B at 0.1 % meter noise, 15 min, seed 7: the held fit's servo × turbine path takes a pole at the
-    stability guard (with a zero beside it), following the meter noise's random walk through the swing;
-    its max|S| and max|G_1| were 11 % and 9 % low with intervals that missed. They are withheld with the
-    reason, with G_p and the TSO checks; the ideal log of the same record (its slowest pole 9 s) keeps
-    them."""
+def test_a_turbine_path_that_follows_the_meter_noise_withholds_g_p():
+    """B at 0.1 % meter noise, 15 min, seed 7: the held fit's servo × turbine path takes a pole far slower
+    than a turbine's, following the meter noise's random walk through the swing. G_p and the TSO checks
+    are withheld with the reason (on the zoo's logs where this happens G_p covered 95 % with two points
+    outside by more than their half-width); the peaks stay, with intervals that hold the truth (73/73 and
+    77/77 there, experiments.TURBINE_TAU_MAX_S). The ideal log of the same record keeps G_p."""
     from fcrlive.analysis.identify import identify_signals
 
     tr = zoo.truth(B)
     noisy = zoo.signals(B, "ctl-0.1pct", minutes=15, excitation=True, seed=7)
     rep = identify_signals(noisy, rated_mw=tr.rated_mw, kd=tr.kd, h=tr.H, method="zcu")
-    why = rep.not_identifiable["max_abs_s"]
+    why = rep.not_identifiable["gp"]
     assert why.startswith("not identifiable") and "servo × turbine path has a pole" in why and "Kd = 0" in why
-    for key in ("max_abs_g1", "gp", "tso"):
-        assert rep.not_identifiable[key] == why
-    assert rep.max_abs_s.value is None and rep.max_abs_g1.value is None and rep.gp is None
+    assert rep.not_identifiable["tso"] == why and rep.gp is None and rep.tso is None
+    for key, truth in (("max_abs_s", tr.max_s), ("max_abs_g1", tr.max_g1)):
+        assert "servo × turbine" not in rep.not_identifiable.get(key, "")
+        q = getattr(rep, key)
+        if q.value is not None:  # shown: its interval holds the truth
+            assert q.ci95[0] <= truth <= q.ci95[1], key
     ideal = zoo.signals(B, "ctl-ideal", minutes=15, excitation=True, seed=7)
     rep_i = identify_signals(ideal, rated_mw=tr.rated_mw, kd=tr.kd, h=tr.H, method="zcu")
     assert not any("servo × turbine path" in why for why in rep_i.not_identifiable.values())

@@ -73,6 +73,32 @@ from fcrlive.signals import PlantSignals, excitation_detected
 
 DEFAULT_TS_ID = 0.5
 """Identification sample time [s] after decimation (module docstring)."""
+ZCU_TS_ID = 0.25
+"""Identification sample time [s] of :func:`zcu_swing`, whose data are decimated by block means
+(``prepare(..., decimator="block")``, each decimated value the mean of its own interval's log samples)
+instead of the Chebyshev filter.
+
+Why: the Chebyshev filter's impulse response spans several decimated samples, so each decimated sample
+of the process noise in w carries noise from before the previous sample, which the controller has already
+answered in c: regressor and noise correlate at lags ≥ 1, the closed-loop bias the output-error fit
+cannot tell from G_jp. A block mean holds only its own interval: c up to the previous sample knows
+nothing of it. What block means cost instead is c's variation inside each block, which the decimated
+model cannot see (and its aliased high frequencies); that shrinks with the sample time. Measured, G_jp
+alone (checks off), 30-min excited logs at the controller rate, ideal logger, 4-6 seeds, median error of
+|G_p| at the 10 s period, Chebyshev at 0.5 s → block means at 0.25 s: A +3.8 → −0.1 %, B +1.0 → −0.3 %,
+C +5.3 → −4.0 %, D +10.8 → +0.4 %, E +0.5 → −1.0 %, F (PID) +52 → +2.0 % (its max|S| +18 → +2.1 %),
+G (poorly damped, 6 dB) +22.5 → −4.1 %; block means at 0.5 s −15 … −22 % on C and G, at 0.125 s −2.2 %
+on G; the Chebyshev filter at 0.25 s still +11.8 % on G. The zoo's excited controller-rate logs (7
+plants, ideal and 0.1 % meter noise, 15/30/60 min, 10 seeds), covered/shown: max|S| 311/314 → 359/362,
+max|G_1| 343/345 → 365/367, |G_p| 3190/3230 → 3676/3694, droop 416/419 → 417/420 (docs/zoo.md). At
+0.125 s the droop's intervals covered as well, but B's 10 Hz log has no second rate left and four G_p
+points at 0.1 % meter noise missed by more than their half-width. Not better everywhere: at 0.1 % meter
+noise the Chebyshev fit's positive bias had hidden the meter noise's negative one (E, 30 min: max|S|
+median error 3.2 → 5.3 %; covered by the meter-noise replicates' widening, :func:`_meter_replicates`), and
+the held fits of B and G follow the meter noise's random walk more often (:data:`TURBINE_TAU_MAX_S`
+withholds their peaks on 47 of 60 such logs, 35 before). The servo a ← c keeps the Chebyshev filter at
+:data:`DEFAULT_TS_ID`: a is no closed-loop output, and c's aliased high frequencies in block means are
+noise on its input (C, PID: droop −0.02 … −0.10 pp, 3 of 10 intervals missed on 15-min ideal logs)."""
 FIT = {"ic": "estimate", "covariance": "sandwich"}
 """Options of every OE/BJ fit: initial states estimated (the records never start at rest and the loop's
 poles are minutes slow), Newey-West covariance (the causal anti-aliasing filter colours the noise)."""
@@ -136,8 +162,12 @@ def prepare(
     skip_s: float | None = None,
     names: Sequence[str] = ("y", "u", "r", "epsilon", "c", "a"),
     u_midpoint: bool = True,
+    decimator: str = "chebyshev",
 ) -> Prepared:
     """Causal anti-aliasing, decimation to ``ts_id`` and per-segment splitting (module docstring).
+
+    ``decimator``: "chebyshev" (:func:`_decimator`) or "block", the mean of the ``q`` log samples up to and
+    including each decimated instant (:func:`_block_mean`, why: :data:`ZCU_TS_ID`).
 
     ``u_midpoint``: u is sampled half an identification step EARLIER than the other signals (linear
     interpolation of the filtered log-rate signal), so that u[m] stands for the middle of the interval
@@ -151,7 +181,9 @@ def prepare(
     if skip_s is None:
         skip_s = 10.0 * ts_new if q > 1 else 0.0
     skip = round(skip_s / ts_new)
-    ba = _decimator(q) if q > 1 else None
+    if decimator not in ("chebyshev", "block"):
+        raise ValueError(f"unknown decimator {decimator!r}")
+    ba = _decimator(q) if q > 1 and decimator == "chebyshev" else None
     avail = [k for k in names if getattr(signals, k, None) is not None]
     out: dict[str, list[np.ndarray]] = {k: [] for k in avail}
     starts, n = [], 0
@@ -161,7 +193,7 @@ def prepare(
         for k in avail:
             x = np.asarray(getattr(signals, k), float)[a:b]
             x = x - x.mean()
-            xf = sps.sosfilt(ba, x) if ba is not None else x
+            xf = sps.sosfilt(ba, x) if ba is not None else (_block_mean(x, q) if q > 1 else x)
             if k == "u" and u_midpoint:
                 # fractional index q·m − q/2: the midpoint of the identification interval
                 lo, hi = np.arange(0, len(x), q) - q // 2, np.arange(0, len(x), q) - (q + 1) // 2
@@ -179,6 +211,13 @@ def prepare(
     sig = {k: np.concatenate(v) for k, v in out.items()}
     lead = (0.5 * q * Ts if q > 1 else 0.5 * Ts) if u_midpoint and "u" in avail else 0.0
     return Prepared(ts_new, q, sig, tuple(starts), n * ts_new, lead)
+
+
+def _block_mean(x: np.ndarray, q: int) -> np.ndarray:
+    """x[n] → mean of x[n−q+1 … n] (from rest: zeros before the start), the block decimator of
+    :func:`prepare`: picked at every q-th sample, each decimated value holds the log samples of its own
+    interval and no other."""
+    return np.convolve(x, np.full(q, 1.0 / q))[: len(x)]
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -308,9 +347,9 @@ class ExperimentResult:
 RESID_PRACTICAL = 0.2
 """Smallest residual auto-/cross-correlation coefficient that a failed residual test of a model WITH a
 noise model must reach to be warned about (:func:`_validate`)."""
-RESID_BAND_Q = 4
-"""The excitation test of :func:`_validate` runs on ε and r low-passed and decimated by this factor (from
-0.5 s to 2 s: periods ≥ 4 s, the peak band of assess.PEAK_MIN_PERIOD_S)."""
+RESID_BAND_TS = 2.0
+"""The excitation test of :func:`_validate` runs on ε and r low-passed and decimated to this sample time
+[s] (periods ≥ 4 s, the peak band of assess.PEAK_MIN_PERIOD_S), from any identification rate."""
 RESID_PRACTICAL_SHARE = 0.01
 """A significant correlation of an output-error model's residual with r is warned about only when the
 r-correlated part (max|r_εr| × rms ε) is at least this share of the output's rms in the band
@@ -324,11 +363,12 @@ def _resid_warning_prefix(key: str) -> str:
 def _excitation_test(key: str, m: PolyModel, d: IdData, r: np.ndarray) -> str | None:
     """Warning when the residual of an output-error model fitted in closed loop still carries the
     excitation r in the identification band to a practical extent, else None (:func:`_validate`)."""
-    ba = _decimator(RESID_BAND_Q)
+    qb = max(1, round(RESID_BAND_TS / d.Ts))
+    ba = _decimator(qb) if qb > 1 else None
     skip = 10  # the decimation filter's transient, as in prepare()
 
     def band(x: np.ndarray) -> np.ndarray:
-        return sps.sosfilt(ba, x)[::RESID_BAND_Q][skip:]
+        return (sps.sosfilt(ba, x) if ba is not None else x)[::qb][skip:]
 
     parts = [(band(e), band(x), band(y)) for e, x, y in
              zip(d.split_signal(m.residuals(d)), d.split_signal(r), d.split_signal(d.y))]
@@ -345,7 +385,7 @@ def _excitation_test(key: str, m: PolyModel, d: IdData, r: np.ndarray) -> str | 
     if t.independent or share < RESID_PRACTICAL_SHARE:
         return None
     return (f"{_resid_warning_prefix(key)}: residuals correlated with the excitation r at "
-            f"periods ≥ {2 * RESID_BAND_Q * d.Ts:g} s (p = {t.p:.2g}; {100 * share:.1f} % of the output's "
+            f"periods ≥ {2 * qb * d.Ts:.3g} s (p = {t.p:.2g}; {100 * share:.1f} % of the output's "
             "rms): dynamics missing from the model")
 
 
@@ -363,7 +403,7 @@ def _validate(
     therefore failed on good data (p = 1e-15..1e-29 on 30-min excited logs of the paper's plant, where
     the model structure is right: 2 of 4 seeds) and taught users to ignore the warning. What such a
     model must satisfy is independence from the EXTERNAL excitation r, which the noise cannot reach,
-    in the band the results come from: ε and r low-passed and decimated by RESID_BAND_Q, portmanteau
+    in the band the results come from: ε and r low-passed and decimated to RESID_BAND_TS, portmanteau
     test with ε's colour (ident.xresid). Measured on the paper's plant, 30 min, 12 dB: right structure
     p = 0.17-1 (5 logs); G_jp of first order p = 2e-6..0.002 and 4.7-10 % of y's rms carried by r
     (the unfiltered test at 0.5 s failed on the right structure too, p < 1e-30: near the Nyquist rate
@@ -837,24 +877,28 @@ def _swing_input(prep: Prepared, q: float) -> IdData:
 
 @dataclass(frozen=True)
 class SwingPole:
-    """How :func:`zcu_swing` treats G_jp's swing pole, G_J's q = e^{−Kd Ts/2H} at the rate Ts.
+    """G_jp's swing pole in :func:`zcu_swing`: G_J's q = e^{−Kd Ts/2H} at the rate Ts, held, not fitted.
 
-    Held where Kd = 0 (q = 1, on the unit circle, where a search may not go): G_jp = G_t/(1 − q z⁻¹), G_t
-    = servo × turbine fitted on c_J (:func:`_swing_input`) with a drift through the pole
-    (``oe(..., drift_pole=q)``). Fitted otherwise: inside the circle the search finds it, and the loop
-    model's initial state already holds the swing's step response; G_jp's static gain is then read with
-    the pole shared with G_J's (:func:`_gjp_shared`). Why not held for every unit: on the zoo's 30- and
-    60-min excited logs of F (PID, droop around it, Kd = 0.5) the held fit moved max abs S +6 … +7 % with
-    ±1.5 % intervals that the delay check no longer withheld (4 records outside by 2-3.4 half-widths),
-    while with the fitted pole no published number of a Kd > 0 unit differs by 1e-4 between BLAS kernels
-    (the zoo's excited controller-rate logs; docs/zoo.md)."""
+    G_jp = G_t/(1 − q z⁻¹), G_t = servo × turbine fitted on c_J (:func:`_swing_input`) with a drift through
+    the pole (``oe(..., drift_pole=q)``): the swing carries any constant mismatch between the mechanical
+    and the measured power into w. Why held: for Kd = 0 the pole is ON the unit circle, where a search may
+    not go (it pressed the pole against the stability guard on 31 of 40 main fits of the zoo's B and G and
+    stopped where the rounding took it). For Kd > 0 the fitted pole, near 1 at the block means' 0.25 s
+    (:data:`ZCU_TS_ID`), lay in a flat valley: on F (30 min, ideal log, seed 1) the main search ended
+    "no descent" under Haswell and at its iteration limit under Sandybridge, losses 0.08 % and parameters
+    3× apart; the zoo's excited controller-rate logs (ideal and 0.1 % meter noise, 15/30 min, 5 seeds, 7
+    plants): 306 of 4842 published numbers differed by more than 1e-4 relative between the two kernels,
+    133 by more than 1 %, 3 were shown under one only. Held: 3 of 4440 by more than 1e-4 (at most
+    1.8e-4), none by 1 %, none shown under one kernel only. Accuracy, same logs with 10 seeds and 15/30/60
+    min (fitted → held): max abs S covered 359/362 → 384/384, max abs G_1 365/367 → 393/394, abs G_p
+    3676/3694 → 3214/3218; median abs error of max abs S at 30 min, 0.1 % meter noise, A 3.6 → 2.2 %, D
+    2.6 → 1.5 %, E 5.3 → 4.1 %. Fewer G_p shown: :data:`TURBINE_TAU_MAX_S` now withholds G_p of Kd > 0
+    units too where the turbine path follows the meter noise (at 0.1 %: A 13, D 9, E 14, F 7 of 30 logs).
+    (Held with the Chebyshev data at 0.5 s, before the block means, F's max abs S moved +6 … +7 % with
+    narrow intervals: that was its PID's closed-loop bias, which the block means removed.)"""
 
     H: float
     kd: float
-
-    @property
-    def held(self) -> bool:
-        return self.kd == 0.0
 
     def q(self, Ts: float) -> float:
         return float(np.exp(-self.kd * Ts / (2.0 * self.H)))
@@ -865,58 +909,60 @@ class SwingPole:
 
     @property
     def orders(self) -> tuple[tuple[int, int], ...]:
-        """(nb, nf) candidates of the fitted part (G_t held, G_jp otherwise)."""
-        return tuple((nb, nf - 1) for nb, nf in SWING_ORDERS) if self.held else SWING_ORDERS
+        """(nb, nf) candidates of G_t: those of G_jp (:data:`SWING_ORDERS`) less the held pole."""
+        return tuple((nb, nf - 1) for nb, nf in SWING_ORDERS)
 
-    @property
-    def model_key(self) -> str:
-        return "y+G_J u<-G_J c" if self.held else "y+G_J u<-c"
+    model_key = "y+G_J u<-G_J c"
 
     def data(self, prep: Prepared) -> IdData:
-        return _swing_input(prep, self.q(prep.Ts)) if self.held else prep.iddata("y", ("c",))
+        return _swing_input(prep, self.q(prep.Ts))
 
     def fit_kw(self, Ts: float) -> dict:
-        """Options of every fit of the fitted part at the rate Ts (with ``FIT`` or ``_JK_FIT``)."""
-        return {"drift_pole": self.q(Ts)} if self.held else {}
+        """Options of every fit of G_t at the rate Ts (with ``FIT`` or ``_JK_FIT``)."""
+        return {"drift_pole": self.q(Ts)}
 
     def start_poles(self, Ts: float, t_s: float, t_t: float, nf: int) -> list[float]:
-        servo_turbine = [float(np.exp(-Ts / t_s)), float(np.exp(-Ts / t_t))]
-        if self.held:
-            return servo_turbine[:nf]
-        return [min(self.q(Ts), 1.0 - 1e-4), *servo_turbine][:nf]  # strictly stable start
+        return [float(np.exp(-Ts / t_s)), float(np.exp(-Ts / t_t))][:nf]
 
     def value(self, m: PolyModel, w: np.ndarray) -> np.ndarray:
-        """G_jp(e^{jωTs}) of the fit ``m`` (at its own rate)."""
-        return _gjp_value(m, w, self.q(m.Ts)) if self.held else _gjp_shared_value(m, w, self.q(m.Ts))
+        """G_jp(e^{jωTs}) of the fit ``m`` of G_t (at its own rate)."""
+        return _gjp_value(m, w, self.q(m.Ts))
 
     def freqresp(self, m: PolyModel, w: np.ndarray) -> FreqResp:
         """:meth:`value` with its uncertainty."""
-        return _gjp(m, w, self.q(m.Ts)) if self.held else _gjp_shared(m, w, self.q(m.Ts))
+        return _gjp(m, w, self.q(m.Ts))
 
 
 TURBINE_TAU_MAX_S = 30.0
-"""Slowest time constant [s] of a fitted turbine path G_t = servo × turbine (a held swing pole,
-:class:`SwingPole`) that is taken for one: a hydro unit's servo and turbine are fractions of a second to a
-few seconds (Tg, Tw/2). Slower, the fit follows the power meter's noise, which the swing of a unit without
-damping integrates into a random walk of y + G_J u, with a pole-zero pair near z = 1; the peaks and G_p
-then depend on it (:func:`_slow_turbine_path`). Measured on the zoo's B and G (excited, controller rate,
+"""Slowest time constant [s] of a fitted turbine path G_t = servo × turbine (:class:`SwingPole`) that is
+taken for one: a hydro unit's servo and turbine are fractions of a second to a few seconds (Tg, Tw/2).
+Slower, the fit follows the power meter's noise, which the swing integrates into w = y + G_J u (Kd = 0: a
+random walk; Kd > 0: a drift of time constant 2H/Kd), with a pole-zero pair near z = 1; G_p then depends
+on it (:func:`_slow_turbine_path`). Measured on the zoo's B and G (excited, controller rate,
 15/30/60 min, 6 seeds): the slowest pole 0.27-12 s on every ideal log, 68-3000 s (or at the guard) on
-25 of 36 logs at 0.1 % meter noise, whose max abs S and max abs G_1 missed on 4 of 12 shown (10 seeds)."""
+25 of 36 logs at 0.1 % meter noise. With the Chebyshev data at 0.5 s their max abs S and max abs G_1
+missed on 4 of 12 shown (10 seeds), so the rule withheld the peaks too. With the block means at 0.25 s
+(:data:`ZCU_TS_ID`) and the pole held for every unit it fires on 97 of the zoo's 420 excited
+controller-rate logs (7 plants, 15/30/60 min, 10 seeds; 92 at 0.1 % meter noise), and shown anyway (the
+rule switched off) the peaks of those logs were covered 73/73 (max abs S) and 77/77 (max abs G_1), with
+errors up to −26 … +45 % on B and intervals to match, the G_p points 920/965 (95.3 %, two outside by
+more than their half-width: G at 10 s, −25.5 % ± 12 % and −14.2 % ± 5.6 %), on the logs where it does
+not fire 3214/3218. So it now withholds G_p and the TSO checks only."""
 
 
 def _slow_turbine_path(m: PolyModel, sw: SwingPole) -> str | None:
-    """The reason the peaks and G_p are not identifiable when the held-pole fit's turbine path ``m`` has a
-    pole slower than :data:`TURBINE_TAU_MAX_S` (None otherwise, and for a fitted swing pole)."""
-    if not sw.held:
-        return None
+    """The reason G_p (and the TSO checks) are not identifiable when the fitted turbine path ``m`` has a
+    pole slower than :data:`TURBINE_TAU_MAX_S` (None otherwise)."""
     r = float(np.max(np.abs(np.roots(m.f[0])))) if len(m.f[0]) > 1 else 0.0
     tau = np.inf if r >= 1.0 else (-m.Ts / np.log(r) if r > 0 else 0.0)
     if not tau > TURBINE_TAU_MAX_S:
         return None
     t = "at the stability guard" if not np.isfinite(tau) else f"with a time constant of {tau:.0f} s"
+    walk = ("a random walk through the swing of a unit without damping (Kd = 0)" if sw.kd == 0.0 else
+            f"a drift through the swing (2H/Kd = {2.0 * sw.H / sw.kd:.0f} s)")
     return (f"not identifiable from this log: the fitted servo × turbine path has a pole {t} (a "
-            "turbine's are seconds): it follows the power meter's noise, a random walk through the swing of "
-            "a unit without damping (Kd = 0), and max|S|, max|G_1| and G_p depend on it")
+            f"turbine's are seconds): it follows the power meter's noise, {walk}, and G_p at the TSO's "
+            "periods depends on it")
 
 
 def _swing_search(d: IdData, nb: int, nf: int, Ts: float, sw: SwingPole,
@@ -949,7 +995,7 @@ def zcu_swing(
     H: float,
     kd: float,
     controller: ControllerEstimate | None = None,
-    ts_id: float = DEFAULT_TS_ID,
+    ts_id: float = ZCU_TS_ID,
     orders: Sequence[tuple[int, int]] | None = None,
     jackknife: bool = True,
     rate_check: bool = True,
@@ -960,11 +1006,12 @@ def zcu_swing(
 
     y = G_jp c − G_J u + v, hence w = y + G_J u = G_jp c + v: an output-error fit w ← c (nk = 1), orders
     by BIC (:data:`SWING_ORDERS`). G_jp = servo × turbine × swing shares G_J's pole, q = e^{−Kd Ts/2H} at
-    the identification rate. For a unit without damping (Kd = 0, q = 1, on the unit circle) that pole is
-    held (:class:`SwingPole`): G_jp = G_t/(1 − z⁻¹), G_t = servo × turbine fitted on c_J = c/(1 − z⁻¹)
-    (:func:`_swing_input`), with each experiment's initial states, offset AND a ramp estimated
-    (``oe(..., drift_pole=1)``): the swing integrates any constant mismatch between the mechanical and the
-    measured power (a nonlinear turbine's mean, the means removed per segment) into a ramp of w. Why: with
+    the identification rate, which is held (:class:`SwingPole`, why for Kd > 0 there): G_jp = G_t/(1 −
+    q z⁻¹), G_t = servo × turbine fitted on c_J = c/(1 − q z⁻¹) (:func:`_swing_input`), with each
+    experiment's initial states, offset AND a drift through the pole estimated (``oe(...,
+    drift_pole=q)``): the swing integrates any constant mismatch between the mechanical and the measured
+    power (a nonlinear turbine's mean, the means removed per segment) into w (Kd = 0: a ramp). Why, for
+    Kd = 0 (q = 1, on the unit circle): with
     the pole fitted, the search pressed it against the stability guard (31 of 40 main fits of the zoo's B
     and G; the ramp was what a pole beyond 1 tried to follow), and where such a search stopped depended on
     the rounding of the arithmetic: Haswell vs Sandybridge kernels, the zoo's excited logs at the
@@ -977,12 +1024,13 @@ def zcu_swing(
     min), fitted → held: max|S| covered 70/71 → 76/76, max|G_1| 75/76 → 81/81; median abs error of max|S|
     on the ideal logs B 1.6/1.4/4.5 → 0.6/0.7/0.9 %, G 2.7/1.1/2.2 → 1.1/1.7/1.4 % (docs/zoo.md).
 
-    Known limit: the causal anti-aliasing filter spreads each process-noise sample over several decimated
-    samples, which the controller has already reacted to, so the decimated
-    noise is correlated with past c. Where c reacts strongly to the noise (a PID's derivative) that biases
-    G_jp: max|S| +13 % on the zoo's classic PID on an ideal log (a Box-Jenkins noise model took it to
-    +4..7 % but landed in wrong basins elsewhere: droop −2 pp, max|G_1| −52 % on a unit with Kd = 0, at 2-10×
-    the time). u enters only through the known low-pass G_J, so the power meter's noise
+    The data are block means at :data:`ZCU_TS_ID` (why, with the figures: there): a causal anti-aliasing
+    filter spreads each process-noise sample over several decimated samples, which the controller has
+    already answered in c, and the decimated noise correlates with past c; where c reacts strongly to
+    the noise (a PID's derivative) that biased G_jp (max|S| +13 … +18 % on the zoo's classic PID on an
+    ideal log; a Box-Jenkins noise model took it to +4..7 % but landed in wrong basins elsewhere: droop
+    −2 pp, max|G_1| −52 % on a unit with Kd = 0, at 2-10× the time). u enters only through the known
+    low-pass G_J, so the power meter's noise
     on u becomes output noise of w instead of input noise of a fitted u path: the errors-in-variables bias
     that put Z_cu's G_J 68-74 % off at 0.1 % meter noise (and its peaks with it) is gone, and a unit
     without damping (Kd = 0, G_J an integrator) no longer needs a fitted pole on the unit circle.
@@ -1003,8 +1051,8 @@ def zcu_swing(
     their intervals (``ExperimentResult.not_identifiable``; max|G_1| by any move out of its interval once
     max|S| is withheld): the data leave the answer to the assumed structure. With ``rate_check``
     (default) G_jp is fitted once more at half the sample time and the intervals of |S|, |G_1| and |G_p|
-    grow by the two fits' difference (:func:`_rate_check_fit`): the closed-loop bias above shrinks with
-    the sample time, which the jackknife cannot see. Meter noise (``meter_check``, default): the power
+    grow by the two fits' difference (:func:`_rate_check_fit`): the block means' error shrinks with the
+    sample time, which the jackknife cannot see. Meter noise (``meter_check``, default): the power
     meter's noise reaches w as G_J n, a slow (Kd small) or random-walk (Kd = 0) disturbance whose effect the
     lag-based sandwich underestimates (zoo, 15-min excited logs at the controller rate: droop covered
     104/128 with 0.1 % meter noise, 136/140 without it); G_jp is refitted on :data:`METER_REPLICATES`
@@ -1017,7 +1065,7 @@ def zcu_swing(
     sig_w = replace(signals, y=swing_removed(signals, H, kd))
     # r only for the residual test (_validate), and only when it is an excitation, not rounding
     names = ("y", "c", "a", "r") if excitation_detected(signals) else ("y", "c", "a")
-    prep = prepare(sig_w, ts_id=ts_id, names=names)
+    prep = prepare(sig_w, ts_id=ts_id, names=names, decimator="block")
     _check_length(prep, "zcu")
     notes = [f"G_J = 1/(2Hs + Kd) from the data sheet (H = {H:g} s, Kd = {kd:g}); G_jp = y/c fitted on "
              "y + G_J u"]
@@ -1046,12 +1094,14 @@ def zcu_swing(
         if f[0] < best[0] - 1.0:
             best = f
     _, o_best, m_cu = best
-    if sw.held:
-        notes.append(f"G_jp = G_t/(1 − z⁻¹): G_J's pole held (Kd = 0); G_t output-error orders (nb, nf) = "
-                     f"{o_best} by BIC, with a drift through the pole")
-    else:
-        notes.append(f"G_jp output-error orders (nb, nf) = {o_best} by BIC")
-    d_ca = prep.iddata("a", ("c",))
+    notes.append(f"G_jp = G_t/(1 − q z⁻¹), q = {sw.q(prep.Ts):.6g}: G_J's pole held (Kd = {kd:g}); G_t "
+                 f"output-error orders (nb, nf) = {o_best} by BIC, with a drift through the pole")
+    # the servo a ← c as Z_cu and Z_ur fit it (Chebyshev filter, DEFAULT_TS_ID): a is no closed-loop
+    # output (the process noise reaches it only through c), while c's aliased high frequencies in block
+    # means are input noise to it (C, PID: droop −0.02 … −0.10 pp, 3 of 10 outside their intervals on
+    # 15-min ideal logs), and at 0.25 s its residual kept r (OE(2, 1) short of the servo's dynamics)
+    prep_ca = prepare(sig_w, ts_id=max(ts_id, DEFAULT_TS_ID), names=("c", "a", *names[3:]))
+    d_ca = prep_ca.iddata("a", ("c",))
     m_ca = _fit("a ← c", oe, d_ca, 2, 1, 0, **FIT)
     ctl = controller
 
@@ -1092,9 +1142,10 @@ def zcu_swing(
                                       f"zcu_swing two-rate bias of {key}")
         return out
 
-    r_val = prep.signals.get("r")
-    val, warns = _validate({"y + G_J u ← G_J c" if sw.held else "y + G_J u ← c": (m_cu, d),
-                            "a ← c": (m_ca, d_ca)}, r_val)
+    val, warns = _validate({"y + G_J u ← G_J c": (m_cu, d)},
+                           prep.signals.get("r"))
+    val_ca, warns_ca = _validate({"a ← c": (m_ca, d_ca)}, prep_ca.signals.get("r"))
+    val, warns = {**val, **val_ca}, [*warns, *warns_ca]
     if not jackknife:
         notes.append("intervals of S, G_1 and G_p from the covariance alone (jackknife switched off)")
     elif len(jk) >= JACKKNIFE_MIN_FITS:
@@ -1109,8 +1160,8 @@ def zcu_swing(
         ni["droop"] = meter_why
     slow_why = _slow_turbine_path(m_cu, sw)
     if slow_why is not None:
-        for key in ("max_abs_s", "max_abs_g1", "gp", "tso"):
-            ni[key] = slow_why
+        for key in ("gp", "tso"):
+            ni.setdefault(key, slow_why)
     return ExperimentResult(
         "zcu", prep.Ts, d.N, prep.duration_s, {sw.model_key: m_cu, "a<-c": m_ca}, responses,
         ("G_1", "S", "G_p"), ctl, val, tuple(warns), tuple(notes), ni,
@@ -1206,7 +1257,8 @@ def _meter_replicates(signals: PlantSignals, sig_w: PlantSignals, d: IdData, m: 
         n = rng.standard_normal(len(signals.u)) * (sigma * METER_SCALE)
         w_star = swing_removed(replace(signals, u=np.asarray(signals.u, float) + n), sw.H, sw.kd)
         try:
-            y_star = prepare(replace(sig_w, y=w_star), ts_id=ts_id, names=("y",)).signals["y"]
+            y_star = prepare(replace(sig_w, y=w_star), ts_id=ts_id, names=("y",),
+                             decimator="block").signals["y"]
             d_star = IdData(y_star, d.u, Ts=d.Ts, output_name=d.output_name, input_names=d.input_names,
                             starts=d.starts).detrend("mean")
             m_star = oe(d_star, m.nb[0], m.nf[0], m.nk[0], init=start, **sw.fit_kw(m.Ts), **_JK_FIT)
@@ -1218,7 +1270,7 @@ def _meter_replicates(signals: PlantSignals, sig_w: PlantSignals, d: IdData, m: 
         notes.append(f"meter-noise replicates not possible ({len(out)} of {METER_REPLICATES} refits)")
         if not pct >= METER_MATERIAL_PCT:
             return [], None
-        walk = " (Kd = 0: G_J an integrator, the noise a random walk in it)" if sw.held else ""
+        walk = " (Kd = 0: G_J an integrator, the noise a random walk in it)" if sw.kd == 0.0 else ""
         return [], (f"not identifiable from this log: the power meter's noise (≈ {pct:.2g} % of rated) "
                     f"reaches y + G_J u{walk} and its effect on the droop could not be measured ({len(out)} "
                     f"of {METER_REPLICATES} refits with another draw of it converged); --method lowband "
@@ -1333,7 +1385,7 @@ def _rate_check_fit(
                      f"than half of {prep.Ts:g} s")
         return None
     try:
-        prep2 = prepare(sig_w, ts_id=0.5 * ts_id, names=("y", "c"))
+        prep2 = prepare(sig_w, ts_id=0.5 * ts_id, names=("y", "c"), decimator="block")
         d2 = sw.data(prep2)
         m = None
         if start is not None:

@@ -125,7 +125,7 @@ def identify_signals(
     kd: float = 0.0,
     plant=None,
     method: str = "auto",
-    ts_id: float = ex.DEFAULT_TS_ID,
+    ts_id: float | None = None,
     t_fme_s: float | None = None,
     peak_min_period_s: float = PEAK_MIN_PERIOD_S,
     h: float | None = None,
@@ -150,7 +150,7 @@ def identify_full(
     kd: float = 0.0,
     plant=None,
     method: str = "auto",
-    ts_id: float = ex.DEFAULT_TS_ID,
+    ts_id: float | None = None,
     t_fme_s: float | None = None,
     peak_min_period_s: float = PEAK_MIN_PERIOD_S,
     h: float | None = None,
@@ -263,7 +263,7 @@ def _identify(
     kd: float,
     plant,
     method: str,
-    ts_id: float,
+    ts_id: float | None,
     t_fme_s: float | None,
     peak_min_period_s: float,
     h: float | None,
@@ -304,6 +304,7 @@ def _identify(
         )
         return Identification(rep, a, exp)
     sig = merge_signals(sigs)
+    ts_default = ex.DEFAULT_TS_ID if ts_id is None else ts_id
     if method == "lowband":
         # the excitation in ε is the governor's own only on a log at its controller rate (lowband.lowband)
         at_rate = plant is not None and sig.Ts <= 1.5 * plant.unit.governor.Tc
@@ -322,9 +323,10 @@ def _identify(
             # fitted swing path of plain Z_cu was 35-100 % off on half the zoo and 68-74 % off at 0.1 %
             # meter noise, and its peaks with it, with intervals that excluded the truth.
             if H is not None:
-                exp = ex.zcu_swing(sig, H=float(H), kd=kd, controller=controller, ts_id=ts_id)
+                exp = ex.zcu_swing(sig, H=float(H), kd=kd, controller=controller,
+                                   ts_id=ex.ZCU_TS_ID if ts_id is None else ts_id)
             else:
-                exp = ex.zcu(sig, controller=controller, ts_id=ts_id, kd=kd)
+                exp = ex.zcu(sig, controller=controller, ts_id=ts_default, kd=kd)
         except ControllerFitError as exc:
             # Every quantity of Z_cu hangs on c/ε: with a controller that does not fit, none is identifiable
             # by Z_cu. With H known, auto answers from the low band instead (it needs no controller).
@@ -343,9 +345,9 @@ def _identify(
                                      reason=f"Z_cu rejected by the data ({why}); lowband instead",
                                      t_fme_s=t_fme_s, peak_min_period_s=peak_min_period_s)
     elif method == "zur":
-        exp = ex.zur(sig, ts_id=ts_id, stop_if_withheld=True)
+        exp = ex.zur(sig, ts_id=ts_default, stop_if_withheld=True)
     else:
-        exp = ex.zu(sig, ts_id=ts_id)
+        exp = ex.zu(sig, ts_id=ts_default)
     a = assess(exp, kd=kd, t_fme_s=t_fme_s, peak_min_period_s=peak_min_period_s)
     # With a plant description, "slow" means slower than its own controller; otherwise than a 50 Hz one.
     slow_log_s = 1.5 * plant.unit.governor.Tc if plant is not None else SLOW_LOG_S

@@ -51,7 +51,8 @@ def configure(p: argparse.ArgumentParser) -> None:
         choices=("auto", "zu", "zur", "zcu", "sine", "lowband"),
         help="identification method (default: auto, see docs/identify.md)",
     )
-    p.add_argument("--ts-id", type=float, default=0.5, help="identification sample time [s] (default 0.5)")
+    p.add_argument("--ts-id", type=float, default=None,
+                   help="identification sample time [s] (default 0.25 for zcu with --h, 0.5 otherwise)")
     p.add_argument(
         "--fme",
         type=float,
@@ -118,7 +119,9 @@ def _check_options(args: argparse.Namespace) -> None:
 
     from fcrlive.errors import UserError
 
-    positive = {"--rated-mw": args.rated_mw, "--f0": args.f0, "--ts-id": args.ts_id}
+    positive = {"--rated-mw": args.rated_mw, "--f0": args.f0}
+    if args.ts_id is not None:
+        positive["--ts-id"] = args.ts_id
     if args.fme is not None:
         positive["--fme"] = args.fme
     for opt, value in positive.items():
