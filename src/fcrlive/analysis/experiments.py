@@ -772,7 +772,8 @@ def _swing_check(signals: PlantSignals, responses: Responses, kd: float, ctl, ts
         notes.append("swing-equation check not possible: the fitted G_J is not a swing equation")
         return responses
     try:
-        sw = zcu_swing(signals, H=H_hat, kd=kd, controller=ctl, ts_id=ts_id, delay_check=False)
+        # at zcu_swing's own rate and decimation (block means, ZCU_TS_ID), whatever plain Z_cu's ts_id
+        sw = zcu_swing(signals, H=H_hat, kd=kd, controller=ctl, delay_check=False)
     except (DataError, IdentError, ValueError, np.linalg.LinAlgError) as exc:
         notes.append(f"swing-equation check not possible (Ĥ = {H_hat:.3g} s): {exc}")
         return responses
