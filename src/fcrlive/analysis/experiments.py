@@ -881,22 +881,23 @@ class SwingPole:
     """G_jp's swing pole in :func:`zcu_swing`: G_J's q = e^{−Kd Ts/2H} at the rate Ts, held, not fitted.
 
     G_jp = G_t/(1 − q z⁻¹), G_t = servo × turbine fitted on c_J (:func:`_swing_input`) with a drift through
-    the pole (``oe(..., drift_pole=q)``): the swing carries any constant mismatch between the mechanical
-    and the measured power into w. Why held: for Kd = 0 the pole is ON the unit circle, where a search may
-    not go (it pressed the pole against the stability guard on 31 of 40 main fits of the zoo's B and G and
-    stopped where the rounding took it). For Kd > 0 the fitted pole, near 1 at the block means' 0.25 s
-    (:data:`ZCU_TS_ID`), lay in a flat valley: on F (30 min, ideal log, seed 1) the main search ended
-    "no descent" under Haswell and at its iteration limit under Sandybridge, losses 0.08 % and parameters
-    3× apart; the zoo's excited controller-rate logs (ideal and 0.1 % meter noise, 15/30 min, 5 seeds, 7
-    plants): 306 of 4842 published numbers differed by more than 1e-4 relative between the two kernels,
-    133 by more than 1 %, 3 were shown under one only. Held: 3 of 4440 by more than 1e-4 (at most
-    1.8e-4), none by 1 %, none shown under one kernel only. Accuracy, same logs with 10 seeds and 15/30/60
-    min (fitted → held): max abs S covered 359/362 → 384/384, max abs G_1 365/367 → 393/394, abs G_p
-    3676/3694 → 3214/3218; median abs error of max abs S at 30 min, 0.1 % meter noise, A 3.6 → 2.2 %, D
-    2.6 → 1.5 %, E 5.3 → 4.1 %. Fewer G_p shown: :data:`TURBINE_TAU_MAX_S` now withholds G_p of Kd > 0
-    units too where the turbine path follows the meter noise (at 0.1 %: A 13, D 9, E 14, F 7 of 30 logs).
-    (Held with the Chebyshev data at 0.5 s, before the block means, F's max abs S moved +6 … +7 % with
-    narrow intervals: that was its PID's closed-loop bias, which the block means removed.)"""
+    the pole (``oe(..., drift_pole=q)``): the swing carries any constant mismatch between the mechanical and
+    the measured power into w. Why held: for Kd = 0 the pole is ON the unit circle, where a search may not go
+    (it pressed the pole against the stability guard on 31 of 40 main fits of the zoo's B and G and stopped
+    where the rounding took it). For Kd > 0 the fitted pole, near 1 at the block means' 0.25 s
+    (:data:`ZCU_TS_ID`), lay in a flat valley: on F (30 min, ideal log, seed 1) the main search ended "no
+    descent" under Haswell and at its iteration limit under Sandybridge, losses 0.08 % and parameters 3×
+    apart; the zoo's excited controller-rate logs (ideal and 0.1 % meter noise, 15/30 min, 5 seeds, 7 plants):
+    306 of 4842 published numbers differed by more than 1e-4 relative between the two kernels, 133 by more
+    than 1 %, 3 were shown under one only. Held: 3 of 4440 by more than 1e-4 (at most 1.8e-4), none by 1 %,
+    none shown under one kernel only (with the peaks of :data:`TURBINE_TAU_MAX_S`'s logs shown: 8 of 4533, at
+    most 3.7e-4, interval ends at 0.1 % meter noise). Accuracy, same logs with 10 seeds and 15/30/60 min
+    (fitted → held): max abs S covered 359/362 → 384/384, max abs G_1 365/367 → 393/394, abs G_p 3676/3694 →
+    3214/3218; median abs error of max abs S at 30 min, 0.1 % meter noise, A 3.6 → 2.2 %, D 2.6 → 1.5 %, E 5.3
+    → 4.1 %. Fewer G_p shown: :data:`TURBINE_TAU_MAX_S` now withholds G_p of Kd > 0 units too where the
+    turbine path follows the meter noise (at 0.1 %: A 13, D 9, E 14, F 7 of 30 logs). (Held with the Chebyshev
+    data at 0.5 s, before the block means, F's max abs S moved +6 … +7 % with narrow intervals: that was its
+    PID's closed-loop bias, which the block means removed.)"""
 
     H: float
     kd: float
@@ -959,11 +960,11 @@ def _slow_turbine_path(m: PolyModel, sw: SwingPole) -> str | None:
     if not tau > TURBINE_TAU_MAX_S:
         return None
     t = "at the stability guard" if not np.isfinite(tau) else f"with a time constant of {tau:.0f} s"
-    walk = ("a random walk through the swing of a unit without damping (Kd = 0)" if sw.kd == 0.0 else
-            f"a drift through the swing (2H/Kd = {2.0 * sw.H / sw.kd:.0f} s)")
+    walk = ("a random walk: a unit without damping, Kd = 0" if sw.kd == 0.0 else
+            f"a drift of time constant 2H/Kd = {2.0 * sw.H / sw.kd:.0f} s")
     return (f"not identifiable from this log: the fitted servo × turbine path has a pole {t} (a "
-            f"turbine's are seconds): it follows the power meter's noise, {walk}, and G_p at the TSO's "
-            "periods depends on it")
+            f"turbine's are seconds): it follows a slow drift of y + G_J u, such as the power meter's "
+            f"noise through the swing ({walk}), and G_p at the TSO's periods depends on it")
 
 
 def _swing_search(d: IdData, nb: int, nf: int, Ts: float, sw: SwingPole,
