@@ -89,14 +89,15 @@ alone (checks off), 30-min excited logs at the controller rate, ideal logger, 4-
 C +5.3 → −4.0 %, D +10.8 → +0.4 %, E +0.5 → −1.0 %, F (PID) +52 → +2.0 % (its max|S| +18 → +2.1 %),
 G (poorly damped, 6 dB) +22.5 → −4.1 %; block means at 0.5 s −15 … −22 % on C and G, at 0.125 s −2.2 %
 on G; the Chebyshev filter at 0.25 s still +11.8 % on G. The zoo's excited controller-rate logs (7
-plants, ideal and 0.1 % meter noise, 15/30/60 min, 10 seeds), covered/shown: max|S| 311/314 → 359/362,
-max|G_1| 343/345 → 365/367, |G_p| 3190/3230 → 3676/3694, droop 416/419 → 417/420 (docs/zoo.md). At
-0.125 s the droop's intervals covered as well, but B's 10 Hz log has no second rate left and four G_p
+plants, ideal and 0.1 % meter noise, 15/30/60 min, 10 seeds), covered/shown, before → block means with
+the swing pole held (:class:`SwingPole`): max|S| 311/314 → 384/384, max|G_1| 343/345 → 393/394, |G_p|
+3190/3230 → 3214/3218, droop 416/419 → 417/419, none outside by more than its half-width (docs/zoo.md).
+At 0.125 s the droop's intervals covered as well, but B's 10 Hz log has no second rate left and four G_p
 points at 0.1 % meter noise missed by more than their half-width. Not better everywhere: at 0.1 % meter
 noise the Chebyshev fit's positive bias had hidden the meter noise's negative one (E, 30 min: max|S|
-median error 3.2 → 5.3 %; covered by the meter-noise replicates' widening, :func:`_meter_replicates`), and
-the held fits of B and G follow the meter noise's random walk more often (:data:`TURBINE_TAU_MAX_S`
-withholds their peaks on 47 of 60 such logs, 35 before). The servo a ← c keeps the Chebyshev filter at
+median error 3.2 → 4.1 %; covered by the meter-noise replicates' widening, :func:`_meter_replicates`), and
+the fits of B and G follow the meter noise's random walk more often (:data:`TURBINE_TAU_MAX_S` fires on
+47 of their 60 such logs, 35 before). The servo a ← c keeps the Chebyshev filter at
 :data:`DEFAULT_TS_ID`: a is no closed-loop output, and c's aliased high frequencies in block means are
 noise on its input (C, PID: droop −0.02 … −0.10 pp, 3 of 10 intervals missed on 15-min ideal logs)."""
 FIT = {"ic": "estimate", "covariance": "sandwich"}
@@ -1098,11 +1099,12 @@ def zcu_swing(
     _, o_best, m_cu = best
     notes.append(f"G_jp = G_t/(1 − q z⁻¹), q = {sw.q(prep.Ts):.6g}: G_J's pole held (Kd = {kd:g}); G_t "
                  f"output-error orders (nb, nf) = {o_best} by BIC, with a drift through the pole")
-    # the servo a ← c as Z_cu and Z_ur fit it (Chebyshev filter, DEFAULT_TS_ID): a is no closed-loop
+    # the servo a ← c as plain Z_cu fits it (Chebyshev filter, DEFAULT_TS_ID): a is no closed-loop
     # output (the process noise reaches it only through c), while c's aliased high frequencies in block
     # means are input noise to it (C, PID: droop −0.02 … −0.10 pp, 3 of 10 outside their intervals on
     # 15-min ideal logs), and at 0.25 s its residual kept r (OE(2, 1) short of the servo's dynamics)
-    prep_ca = prepare(sig_w, ts_id=max(ts_id, DEFAULT_TS_ID), names=("c", "a", *names[3:]))
+    prep_ca = prepare(sig_w, ts_id=max(ts_id, DEFAULT_TS_ID),
+                      names=("c", "a", "r") if "r" in names else ("c", "a"))
     d_ca = prep_ca.iddata("a", ("c",))
     m_ca = _fit("a ← c", oe, d_ca, 2, 1, 0, **FIT)
     ctl = controller
