@@ -74,11 +74,11 @@ def _flat(x) -> list:
 def test_the_same_log_gives_the_same_numbers_under_two_blas_kernels(tmp_path):
     """B at 0.1 % meter noise, 15 min, seed 1: max|S| 1.519 [1.216, 1.822] under one kernel and
     [1.012, 2.025] under the other before (the delay check then withheld it under one only); G seed 3:
-    jackknife refits 0.3 % apart (at 0.1 % meter noise; since the block means its peaks are withheld
-    there, its ideal log is the one with them). Now every published number agrees to 1e-4 relative (the
+    jackknife refits 0.3 % apart (at 0.1 % meter noise; since the block means its G_p is withheld there,
+    its ideal log is the one with G_p). Now every published number agrees to 1e-4 relative (the
     project's standard, ../shared/tools/blas-determinism; what is left is the searches' stopping
-    tolerance), and what is withheld is withheld under both (B's peaks and G_p: its turbine path follows
-    the meter noise, experiments.TURBINE_TAU_MAX_S; its droop is shown)."""
+    tolerance), and what is withheld is withheld under both (B's G_p: its turbine path follows the meter
+    noise, experiments.TURBINE_TAU_MAX_S)."""
     cases = []
     for plant, seed, logger in ((B, 1, "ctl-0.1pct"), (G, 3, "ctl-ideal")):
         tr = zoo.truth(plant)

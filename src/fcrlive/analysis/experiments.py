@@ -17,7 +17,8 @@ delay from the process noise in y to the controller output (paper Condition C1);
 smears future noise into past inputs and biased S by 5-10 % in trials on paper-plant1, the causal filter
 keeps the ordering. Gaps (``PlantSignals.segments``) split the data into experiments; every segment is
 filtered from rest and its first ``skip_s`` seconds (filter transient) dropped; means are removed per
-experiment.
+experiment. Z_cu with H (:func:`zcu_swing`) decimates by block means instead, to :data:`ZCU_TS_ID`: the
+causal filter's impulse response still spans several decimated samples, which biased it (there).
 
 The input u
 -----------
@@ -970,9 +971,9 @@ def _slow_turbine_path(m: PolyModel, sw: SwingPole) -> str | None:
 
 def _swing_search(d: IdData, nb: int, nf: int, Ts: float, sw: SwingPole,
                   beat: float | None = None) -> PolyModel | None:
-    """OE of G_jp's fitted part (:class:`SwingPole`) from physical starts: the swing pole from the data
-    sheet where it is fitted, servo and turbine poles from :data:`SWING_STARTS_S`, numerators by least
-    squares; the lowest-loss end point wins, ties (N log of the loss ratio < 0.01) to the earlier start.
+    """OE of G_t = servo × turbine (:class:`SwingPole`; the swing pole is held) from physical starts:
+    servo and turbine poles from :data:`SWING_STARTS_S`, numerators by least squares; the lowest-loss end
+    point wins, ties (N log of the loss ratio < 0.01) to the earlier start.
     The default multistart (high-order ARX and Steiglitz-McBride starts) ended at different points by BLAS
     kernel on the same log (max|S| 1.230 vs 1.253): its searches did not converge in the flat valley
     around the slow swing pole. ``beat``: a loss another fit of ``d`` reached (searches converged above it
