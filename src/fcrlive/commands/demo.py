@@ -16,6 +16,10 @@ daemon identifies then does not depend on the machine's load.
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the CLI imports its commands at start-up: pydantic models load only when run
+    from fcrlive.daemon.payloads import ResultPayload
 
 NAME = "demo"
 HELP = ("run the whole system on embedded defaults (simulated governor, MQTT broker, daemon); "
@@ -178,7 +182,8 @@ def summary_json(results: list[dict], truth: dict, kd: float) -> dict:
     typed ``result/latest`` payload (:class:`fcrlive.daemon.payloads.ResultPayload` and its
     :class:`~fcrlive.analysis.report.IdentifyReport`). A number the quality rule withholds, or one the
     method cannot give, is null; ``ci95`` is the report's 95 % interval [lower, upper], an end null where
-    it is unknown; ``tso`` the TSO decision per product (pass / fail / undecided), null when withheld."""
+    it is unknown; ``tso`` the TSO decision per product (pass / fail / undecided), null when withheld;
+    ``reasons`` says why, per null number."""
     from fcrlive.analysis.report import ValueCI
     from fcrlive.daemon.payloads import ResultPayload
 
@@ -197,12 +202,41 @@ def summary_json(results: list[dict], truth: dict, kd: float) -> dict:
                 return None
             return {"value": v.value * scale, "ci95": [None if e is None else e * scale for e in v.ci95]}
 
-        out["windows"].append({
+        win = {
             "method": None if r is None else r.method, "verdict": verdict,
             "lost_samples": p.quality.counts.get("missing", 0),
             "droop": num(r and r.droop, 100.0), "max_abs_s": num(r and r.max_abs_s),
             "max_abs_g1": num(r and r.max_abs_g1),
-            "tso": None if withheld or r.tso is None else {k: v.verdict for k, v in r.tso.items()}})
+            "tso": None if withheld or r.tso is None else {k: v.verdict for k, v in r.tso.items()}}
+        win["reasons"] = _null_reasons(p, win)
+        out["windows"].append(win)
+    return out
+
+
+_ZU_GIVES_NO = "Z_u (normal operation, no excitation) cannot give S, G_p or the TSO checks"
+
+
+def _null_reasons(p: ResultPayload, win: dict) -> dict[str, str]:
+    """Why each null number of a ``--summary-json`` window is null: the run's error, the quality rule's
+    reasons, or the identification's own "not identifiable from this log" (the store that held the whole
+    report is deleted when the demo ends, so the summary keeps the why)."""
+    r, q = p.result, p.result_quality
+    out: dict[str, str] = {}
+    for key in ("droop", "max_abs_s", "max_abs_g1", "tso"):
+        if win[key] is not None:
+            continue
+        if not p.ok or r is None:
+            out[key] = p.error or "the run gave no result"
+        elif q is not None and q.level == "rejected":
+            out[key] = "rejected by the quality rule: " + "; ".join(q.reasons or ["(no reason given)"])
+        elif key == "tso":
+            out[key] = (r.not_identifiable.get("tso") or r.not_identifiable.get("gp")
+                        or (_ZU_GIVES_NO if r.method == "zu" else "no TSO checks from this log"))
+        else:
+            v = getattr(r, key)
+            out[key] = ((v.reason if v is not None else None) or r.not_identifiable.get(key)
+                        or (_ZU_GIVES_NO if r.method == "zu" and key == "max_abs_s" else
+                            "not identifiable from this log"))
     return out
 
 
