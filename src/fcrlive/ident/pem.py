@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -545,6 +545,24 @@ def _search(st: _Struct, th0: np.ndarray, segs, maxiter: int = 100, tol: float =
     return _SearchResult(r.theta, r.ssr, r.iterations, ok, r.stop_reason, r.algorithm, r.eps, r.aux, r.jac)
 
 
+def _halving(st: _Struct, th: np.ndarray, delta: np.ndarray, segs, V: float, tries: int,
+             project: Callable[[np.ndarray], np.ndarray] | None = None):
+    """Step halving along ``delta`` from θ (each candidate through ``project`` when given): the first
+    stable candidate with a loss below V as (θ', ε', aux', V', μ), or None after ``tries`` halvings."""
+    mu = 1.0
+    for _ in range(tries):
+        cand = th + mu * delta
+        if project is not None:
+            cand = project(cand)
+        if _stable(st, cand):
+            e2, aux2 = _residuals(st, cand, segs)
+            V2 = float(e2 @ e2)
+            if V2 < V:
+                return cand, e2, aux2, V2, mu
+        mu *= 0.5
+    return None
+
+
 GUARD_PINNED = 1e-6
 """A real root within this of the unit circle (|r| ≥ 1 − GUARD_PINNED; the guard is at 1 − 1e-7) counts as
 pinned at the stability guard by a search that stopped without converging (:func:`_polish_on_guard`).
@@ -604,8 +622,14 @@ def _polish_on_guard(st: _Struct, r: _SearchResult, segs, maxiter: int, tol: flo
         n = sl.stop - sl.start
         A[i, sl] = [z ** (n - k) for k in range(1, n + 1)]
         b[i] = -(z**n)
-    # θ on the constraint (least change), and the null space of A: the directions that keep it
-    th = r.theta + A.T @ np.linalg.solve(A @ A.T, b - A @ r.theta)
+    AAt = A @ A.T
+
+    def project(x: np.ndarray) -> np.ndarray:
+        """x on the constraint (least change): the null-space steps drift off it by rounding."""
+        return x + A.T @ np.linalg.solve(AAt, b - A @ x)
+
+    # θ on the constraint, and the null space of A: the directions that keep it
+    th = project(r.theta)
     Z = np.linalg.qr(A.T, mode="complete")[0][:, len(pins):]
     if not _stable(st, th):
         return r
@@ -624,22 +648,11 @@ def _polish_on_guard(st: _Struct, r: _SearchResult, segs, maxiter: int, tol: flo
         if float(np.sum((JZ @ eta) ** 2)) <= tol * V:
             reason = "held on the stability guard: predicted relative loss decrease below tolerance"
             break
-        delta = Z @ eta
-        mu, accepted = 1.0, False
-        for _ in range(30):
-            cand = th + mu * delta
-            cand = cand + A.T @ np.linalg.solve(A @ A.T, b - A @ cand)
-            if _stable(st, cand):
-                e2, aux2 = _residuals(st, cand, segs)
-                V2 = float(e2 @ e2)
-                if V2 < V:
-                    accepted = True
-                    break
-            mu *= 0.5
-        if not accepted:
+        step = _halving(st, th, Z @ eta, segs, V, 30, project)
+        if step is None:
             reason = "held on the stability guard: no descent"
             break
-        th, eps, V, aux = cand, e2, V2, aux2
+        th, eps, aux, V = step[:4]
         J = _jacobian(st, segs, aux)
     if r.ssr < V:
         return r
@@ -696,22 +709,13 @@ def _search_iter(st: _Struct, th0: np.ndarray, segs, maxiter: int, tol: float,
             if _beaten(V, pred, eps.shape[0], beat):
                 converged, reason = True, BEATEN
                 break
-            mu = 1.0
-            accepted = False
-            for _ in range(20):
-                cand = th + mu * delta
-                if _stable(st, cand):
-                    e2, aux2 = _residuals(st, cand, segs)
-                    V2 = float(e2 @ e2)
-                    if V2 < V:
-                        accepted = True
-                        break
-                mu *= 0.5
-            if not accepted:
+            step = _halving(st, th, delta, segs, V, 20)
+            if step is None:
                 use_lm = True
                 algorithm = "gn+lm"
                 it -= 1
                 continue
+            cand, e2, aux2, V2, mu = step
             rel = (V - V2) / V
             th = cand
             eps, V, aux = e2, V2, aux2
