@@ -15,9 +15,11 @@ import pickle
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from fcrlive.analysis import experiments as ex
+from fcrlive.constants import Z95
 from fcrlive.sim import zoo
 
 A = "A-classic-tustin-20Hz"
@@ -112,7 +114,9 @@ def test_a_turbine_path_that_follows_the_meter_noise_withholds_g_p():
     than a turbine's, following the meter noise's random walk through the swing. G_p and the TSO checks
     are withheld with the reason (on the zoo's logs where this happens G_p covered 95 % with two points
     outside by more than their half-width); the peaks stay, with intervals that hold the truth (73/73 and
-    77/77 there, experiments.TURBINE_TAU_MAX_S). The ideal log of the same record keeps G_p."""
+    77/77 there, experiments.TURBINE_TAU_MAX_S). A unit without damping is not refitted with a pole for
+    the drift (experiments.DRIFT_REFIT: not the same numbers under two kernels there). The ideal log of
+    the same record keeps G_p."""
     from fcrlive.analysis.identify import identify_signals
 
     tr = zoo.truth(B)
@@ -132,6 +136,39 @@ def test_a_turbine_path_that_follows_the_meter_noise_withholds_g_p():
     assert rep_i.max_abs_s.value is not None and rep_i.max_abs_g1.value is not None and rep_i.gp
 
 
+C = "C-pid-tustin-50Hz"
+
+
+def test_a_turbine_path_that_follows_a_slow_drift_is_refitted_with_a_pole_for_it(monkeypatch):
+    """C (Kd = 1) at 0.1 % meter noise, 15 min, seed 7: G_t's fit (3, 2) puts a pole at the stability guard
+    (the meter noise's drift through the swing, experiments.TURBINE_TAU_MAX_S), leaving one pole for servo
+    and turbine. With one pole more for the drift (experiments.DRIFT_REFIT) servo and turbine have their two
+    fast poles again and G_p is shown, its interval at least as wide as the distance to the first fit's G_p
+    at every TSO period (the structure check, DRIFT_CHECK_FACTOR = 1). Without the refit G_p is withheld."""
+    tr = zoo.truth(C)
+    sig = zoo.signals(C, "ctl-0.1pct", minutes=15, excitation=True, seed=7)
+    kw = dict(H=tr.H, kd=tr.kd, jackknife=False, rate_check=False, delay_check=False, meter_check=False)
+    periods = np.array([p for p, _ in tr.gp])
+    w = 2.0 * np.pi / periods
+
+    res = ex.zcu_swing(sig, **kw)
+    m = res.models["y+G_J u<-G_J c"]
+    assert m.nf == (3,) and any("refitted with 1 pole(s) more" in n for n in res.notes)
+    tau = np.sort(-m.Ts / np.log(np.abs(np.roots(m.f[0]))))
+    assert tau[1] <= ex.TURBINE_TAU_MAX_S < tau[2]  # servo and turbine fast, the drift's pole slow
+    assert "gp" not in res.not_identifiable and "tso" not in res.not_identifiable
+    gp = res.responses(w)["G_p"]
+    assert any("drift-pole structure check" in k for k, _ in gp.sources)
+
+    monkeypatch.setattr(ex, "DRIFT_REFIT", 0)
+    first = ex.zcu_swing(sig, **kw)
+    assert first.models["y+G_J u<-G_J c"].nf == (2,)
+    assert "servo × turbine path has a pole" in first.not_identifiable["gp"]
+    diff = np.abs(np.abs(first.responses(w)["G_p"].value) - np.abs(gp.value))
+    assert np.all(diff > 0)
+    assert np.all(Z95 * gp.sd_abs >= diff * (1.0 - 1e-9))
+
+
 def test_a_search_pinned_at_the_stability_guard_ends_at_the_minimum_with_that_root_held(monkeypatch):
     """A at 0.1 % meter noise, 15 min, seed 1: G_t's search stops against the guard ("no descent even with
     maximal damping") with a real pole at |z| = 1 − 1e-7. Continued with that root held just inside the
@@ -143,6 +180,8 @@ def test_a_search_pinned_at_the_stability_guard_ends_at_the_minimum_with_that_ro
 
     tr = zoo.truth(A)
     sig = zoo.signals(A, "ctl-0.1pct", minutes=15, excitation=True, seed=1)
+    monkeypatch.setattr(ex, "DRIFT_REFIT", 0)  # the one fit of G_t whose search this is about
+
     def fit():
         res = ex.zcu_swing(sig, H=tr.H, kd=tr.kd, jackknife=False, rate_check=False, delay_check=False,
                            meter_check=False)
