@@ -121,10 +121,13 @@ def _fit(task: Task, logger: str, sig, tr, method: str, with_plant: bool, with_h
         q[key] = [_entry(getattr(pk, "value", None), getattr(pk, "ci95", None), truth)
                   | {"omega": getattr(pk, "omega", None), "reason": _reason(pk)}]
     gp = {round(float(pv.period_s), 6): pv for pv in (getattr(rep, "gp", None) or [])}
+    # why G_p was withheld, for the rows' readers (the TSO periods share one reason)
+    gp_why = (getattr(rep, "not_identifiable", None) or {}).get("gp")
     ents = []
     for p, v in tr.gp:
         pv = gp.get(round(p, 6))
-        ents.append(_entry(getattr(pv, "abs", None), getattr(pv, "abs_ci95", None), abs(v)) | {"period_s": p})
+        ents.append(_entry(getattr(pv, "abs", None), getattr(pv, "abs_ci95", None), abs(v))
+                    | {"period_s": p, "reason": None if pv is not None else gp_why})
     q["gp"] = ents
     row["q"] = q
     return row
