@@ -1192,18 +1192,18 @@ def zcu_swing(
             for key in ("S", "G_1", "G_p"):
                 dev = (np.abs(np.array([lp[key] for lp in loops])) - np.abs(out[key].value)) / METER_SCALE
                 out[key] = _widened(out[key], _replicate_sd(dev))
+
+        def distance_to(m_other: PolyModel, factor, label: str) -> None:
+            # a second fit's loop: the distance of its |S|, |G_1|, |G_p| to these, × factor, as a bias
+            other = _loop_values(sw.value(m_other, w), C.value, G_J.value)
+            for key in ("S", "G_1", "G_p"):
+                diff = np.abs(np.abs(other[key]) - np.abs(out[key].value))
+                out[key] = _with_bias(out[key], factor * diff / Z95, f"zcu_swing {label} of {key}")
+
         if fast is not None and np.any(fade > 0):
-            other = _loop_values(sw.value(fast, w), C.value, G_J.value)
-            for key in ("S", "G_1", "G_p"):
-                diff = np.abs(np.abs(other[key]) - np.abs(out[key].value))
-                out[key] = _with_bias(out[key], fade * RATE_CHECK_FACTOR * diff / Z95,
-                                      f"zcu_swing two-rate bias of {key}")
+            distance_to(fast, fade * RATE_CHECK_FACTOR, "two-rate bias")
         if m_drift is not None:
-            other = _loop_values(sw.value(m_drift, w), C.value, G_J.value)
-            for key in ("S", "G_1", "G_p"):
-                diff = np.abs(np.abs(other[key]) - np.abs(out[key].value))
-                out[key] = _with_bias(out[key], DRIFT_CHECK_FACTOR * diff / Z95,
-                                      f"zcu_swing drift-pole structure check of {key}")
+            distance_to(m_drift, DRIFT_CHECK_FACTOR, "drift-pole structure check")
         return out
 
     val, warns = _validate({"y + G_J u ← G_J c": (m_cu, d)},
