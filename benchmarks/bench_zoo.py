@@ -279,6 +279,7 @@ def _commit() -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
+    from fcrlive.errors import ConfigError
     from fcrlive.sim import zoo
 
     ap = argparse.ArgumentParser(prog="bench_zoo", description=__doc__.split("\n\n")[0],
@@ -286,6 +287,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--quick", action="store_true", help="a few cells with few seeds (a few minutes)")
     ap.add_argument("--plants", nargs="+", metavar="NAME", help="zoo plants (default: all but the reference; "
                     "--quick: 4)")
+    ap.add_argument("--held-out", type=int, metavar="N", help="the held-out plants held-out-0 .. N-1 "
+                    "(fcrlive.sim.zoo.held_out: drawn at random, which no estimator was developed on) "
+                    "instead of the named ones")
     ap.add_argument("--loggers", nargs="+", metavar="NAME", help="zoo loggers (default: all)")
     ap.add_argument("--minutes", nargs="+", type=float, default=[15.0, 30.0, 60.0], help="log lengths [min]")
     ap.add_argument("--excitation", choices=["no", "yes", "both"], default="both")
@@ -306,10 +310,14 @@ def main(argv: list[str] | None = None) -> None:
         return
     known_p, known_l = zoo.plants(), zoo.loggers()
     plants = a.plants or (list(QUICK_PLANTS) if a.quick else [p for p in known_p if not p.startswith("ref-")])
+    if a.held_out is not None:
+        plants = [*(a.plants or []), *(f"{zoo.HELD_OUT_PREFIX}{k}" for k in range(a.held_out))]
     loggers = a.loggers or list(known_l)
     for p in plants:
-        if p not in known_p:
-            sys.exit(f"bench_zoo: unknown plant {p!r}; known: {', '.join(known_p)}")
+        try:
+            zoo.zoo_plant(p)
+        except ConfigError as e:
+            sys.exit(f"bench_zoo: {e}")
     for lg in loggers:
         if lg not in known_l:
             sys.exit(f"bench_zoo: unknown logger {lg!r}; known: {', '.join(known_l)}")

@@ -52,9 +52,12 @@ def _lockin(zp: zoo.ZooPlant, w: float, kind: str, periods: int = 4, settle_s: f
     return amp(res.epsilon), amp(res.u), amp(res.r)
 
 
-@pytest.mark.parametrize("name", ZOO)
+HELD_OUT = ("held-out-0", "held-out-3", "held-out-4")  # a PI; a PID with its S peak at 1.5 rad/s; Kd = 0
+
+
+@pytest.mark.parametrize("name", [*ZOO, *HELD_OUT])
 def test_truth_matches_the_simulated_plant(name):
-    zp = zoo.plants()[name]
+    zp = zoo.zoo_plant(name)
     t = zoo.truth(name)
     for w in (t.omega_max_g1, t.omega_max_s, 2 * math.pi / 60.0):
         e1, u1, _ = _lockin(zp, w, "load")
@@ -129,6 +132,31 @@ def test_unknown_names_are_config_errors():
         zoo.truth("no-such-plant")
     with pytest.raises(ConfigError, match="known"):
         zoo.zoo_logger("no-such-logger")
+
+
+def test_held_out_plants_are_drawn_by_their_number_alone():
+    first = [zoo.held_out(k) for k in range(12)]
+    zoo.held_out.cache_clear()
+    again = [zoo.zoo_plant(f"held-out-{k}") for k in range(12)]
+    assert first == again  # the same plant from its number, in any process
+    assert len({zp.plant for zp in first}) == 12
+    for zp in first:
+        g, u, t = zp.plant.unit.governor, zp.plant.unit, zoo.truth(zp.name)
+        assert 10.0 <= 1.0 / g.Tc <= 100.0 and 0.02 <= g.droop <= 0.10
+        assert 3.0 <= u.swing.H <= 6.0 and 0.0 <= u.swing.Kd <= 1.0 and 0.6 <= u.turbine.Tw <= 2.0
+        assert 0.01 <= u.rated_mw / zp.plant.grid.s_base_mw <= 0.09 and 6.0 <= zp.snr_db <= 20.0
+        assert zp.model == ("linear" if g.Td > 0 else "nonlinear")
+        assert zoo.HELD_OUT_MAX_S[0] <= t.max_s <= zoo.HELD_OUT_MAX_S[1]
+        poles = np.linalg.eigvals(lin.closed_loop(zp.plant).Phi)
+        assert np.max(np.abs(poles)) < 1.0
+    # the draws cover what the named plants do, not one corner of it
+    govs = [zp.plant.unit.governor for zp in first]
+    assert {g.droop_placement for g in govs} == {"integral", "classic"}
+    assert {g.integral_method for g in govs} == {"forward", "backward", "tustin"}
+    assert any(g.Td > 0 for g in govs) and any(zp.plant.unit.swing.Kd == 0 for zp in first)
+    for bad in ("held-out-x", "held-out--1", "held-out-"):
+        with pytest.raises(ConfigError, match="held-out-K"):
+            zoo.zoo_plant(bad)
 
 
 def test_derivative_action_needs_the_linear_model():

@@ -61,7 +61,9 @@ def _configure_zoo(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("validation zoo and measurement chain (docs/zoo.md)")
     g.add_argument("--list-zoo", action="store_true",
                    help="list the zoo's plants (with their truth) and loggers")
-    g.add_argument("--zoo-plant", metavar="NAME", help="simulate this zoo plant (overrides --preset/--plant)")
+    g.add_argument("--zoo-plant", metavar="NAME",
+                   help="simulate this zoo plant, or held-out-K (a plant drawn at random by its number K, "
+                   "which no estimator was developed on); overrides --preset/--plant")
     g.add_argument("--logger", metavar="NAME", help="write the log through this zoo logger")
     g.add_argument("--log-every", type=int, metavar="K",
                    help="instantaneous samples at 1/K of the controller rate")
