@@ -141,10 +141,11 @@ C = "C-pid-tustin-50Hz"
 
 def test_a_turbine_path_that_follows_a_slow_drift_is_refitted_with_a_pole_for_it(monkeypatch):
     """C (Kd = 1) at 0.1 % meter noise, 15 min, seed 7: G_t's fit (3, 2) puts a pole at the stability guard
-    (the meter noise's drift through the swing, experiments.TURBINE_TAU_MAX_S), leaving one pole for servo
-    and turbine. With one pole more for the drift (experiments.DRIFT_REFIT) servo and turbine have their two
-    fast poles again and G_p is shown, its interval at least as wide as the distance to the first fit's G_p
-    at every TSO period (the structure check, DRIFT_CHECK_FACTOR = 1). Without the refit G_p is withheld."""
+    (the meter noise's drift through the swing, experiments.DAMPED_TURBINE_TAU_MAX_S), leaving one pole
+    for servo and turbine. With one pole more for the drift (experiments.DRIFT_REFIT) servo and turbine
+    have their two fast poles again and G_p is shown, its interval at least as wide as the distance to
+    the first fit's G_p at every TSO period (the structure check, DRIFT_CHECK_FACTOR = 1). Without the
+    refit G_p is withheld."""
     tr = zoo.truth(C)
     sig = zoo.signals(C, "ctl-0.1pct", minutes=15, excitation=True, seed=7)
     kw = dict(H=tr.H, kd=tr.kd, jackknife=False, rate_check=False, delay_check=False, meter_check=False)
@@ -155,7 +156,7 @@ def test_a_turbine_path_that_follows_a_slow_drift_is_refitted_with_a_pole_for_it
     m = res.models["y+G_J u<-G_J c"]
     assert m.nf == (3,) and any("refitted with 1 pole(s) more" in n for n in res.notes)
     tau = np.sort(-m.Ts / np.log(np.abs(np.roots(m.f[0]))))
-    assert tau[1] <= ex.TURBINE_TAU_MAX_S < tau[2]  # servo and turbine fast, the drift's pole slow
+    assert tau[1] <= ex.DAMPED_TURBINE_TAU_MAX_S < tau[2]  # servo and turbine fast, the drift's pole slow
     assert "gp" not in res.not_identifiable and "tso" not in res.not_identifiable
     gp = res.responses(w)["G_p"]
     assert any("drift-pole structure check" in k for k, _ in gp.sources)
@@ -167,6 +168,33 @@ def test_a_turbine_path_that_follows_a_slow_drift_is_refitted_with_a_pole_for_it
     diff = np.abs(np.abs(first.responses(w)["G_p"].value) - np.abs(gp.value))
     assert np.all(diff > 0)
     assert np.all(Z95 * gp.sd_abs >= diff * (1.0 - 1e-9))
+
+
+def test_a_damped_units_drift_pole_at_10_to_30_s_is_not_taken_for_the_turbine(monkeypatch):
+    """held-out-2 (a PID plant no estimator was developed on, Kd = 0.51, 2H/Kd = 19.7 s) at 0.1 % meter
+    noise, 30 min, seed 2: G_t's fit puts a pole at about 22 s, the meter noise's drift through the swing,
+    which the 30-s rule (TURBINE_TAU_MAX_S) took for the turbine's; G_p at 10 s was then 11 % low with an
+    interval that missed (4 such misses on the held-out and zoo logs, all with a pole of 12-28 s).
+    For a unit with damping the rule is 10 s (experiments.DAMPED_TURBINE_TAU_MAX_S): the refit with a
+    pole more for the drift is tried and, where it does not give servo and turbine fast poles, G_p is
+    withheld with the reason."""
+    name = "held-out-2"
+    tr = zoo.truth(name)
+    sig = zoo.signals(name, "ctl-0.1pct", minutes=30, excitation=True, seed=2)
+    kw = dict(H=tr.H, kd=tr.kd, jackknife=False, rate_check=False, delay_check=False, meter_check=False)
+
+    monkeypatch.setattr(ex, "DRIFT_REFIT", 0)
+    first = ex.zcu_swing(sig, **kw).models["y+G_J u<-G_J c"]
+    tau = np.sort(-first.Ts / np.log(np.abs(np.roots(first.f[0]))))
+    assert ex.DAMPED_TURBINE_TAU_MAX_S < tau[-1] < ex.TURBINE_TAU_MAX_S  # the old rule let it through
+
+    monkeypatch.undo()
+    res = ex.zcu_swing(sig, **kw)
+    refitted = any("refitted with" in n for n in res.notes)
+    why = res.not_identifiable.get("gp")
+    assert refitted or (why is not None and "servo × turbine path has a pole with a time constant" in why)
+    if why is not None:
+        assert "2H/Kd = 20 s" in why and res.not_identifiable["tso"] == why
 
 
 def test_a_search_pinned_at_the_stability_guard_ends_at_the_minimum_with_that_root_held(monkeypatch):
