@@ -135,11 +135,12 @@ def test_unknown_names_are_config_errors():
 
 
 def test_held_out_plants_are_drawn_by_their_number_alone():
-    first = [zoo.held_out(k) for k in range(12)]
+    # 24: held-out-21's first unit has no governor in the band, and is redrawn (zoo.held_out)
+    first = [zoo.held_out(k) for k in range(24)]
     zoo.held_out.cache_clear()
-    again = [zoo.zoo_plant(f"held-out-{k}") for k in range(12)]
+    again = [zoo.zoo_plant(f"held-out-{k}") for k in range(24)]
     assert first == again  # the same plant from its number, in any process
-    assert len({zp.plant for zp in first}) == 12
+    assert len({zp.plant for zp in first}) == 24
     for zp in first:
         g, u, t = zp.plant.unit.governor, zp.plant.unit, zoo.truth(zp.name)
         assert 10.0 <= 1.0 / g.Tc <= 100.0 and 0.02 <= g.droop <= 0.10

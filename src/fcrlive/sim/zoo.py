@@ -189,6 +189,33 @@ def held_out(k: int) -> ZooPlant:
     if k < 0:
         raise ConfigError(f"held-out plant number must be >= 0, got {k}")
     rng = np.random.default_rng([20261207, int(k)])
+    name = f"{HELD_OUT_PREFIX}{k}"
+    # a unit for which no (Kp, Ti) of the ranges gives a stable loop with max abs S in the band is
+    # replaced by the next draw of the same stream (held-out-21's first draw: Kd 0, 3.3 % droop around
+    # the controller from the gate, Tc 10 ms: unstable from Kp 0.5 on, max abs S above 2 below it); the
+    # plants whose first draw succeeds are the ones drawn before this rule
+    for _ in range(50):
+        found = _held_out_draw(rng, name)
+        if found is not None:
+            break
+    else:  # pragma: no cover - a redraw of the unit is needed rarely (1 of the first 24)
+        raise ConfigError(f"held-out plant {k}: no governor with max abs S in {HELD_OUT_MAX_S} drawn")
+    plant, kw, pid, share, snr = found
+    td, kd, rated, tc = kw["Td"], kw["Kd"], kw["rated_mw"], kw["Tc"]
+    where = ("in the integral channel" if kw["placement"] == "integral"
+             else f"around the controller ({kw['signal']})")
+    g = plant.unit.governor
+    what = (f"held out: {'PID' if pid else 'PI'} ({kw['method']}) at {1 / tc:g} Hz, Kp {g.Kp:g}, "
+            f"Ti {g.Ti:g} s"
+            f"{f', Td {td:g} s' if pid else ''}, droop {100 * g.droop:g} % {where}"
+            f", H {kw['H']:g} s, Kd {kd:g}, Tw {kw['Tw']:g} s, At {kw['At']:g}, {rated:g} MW at "
+            f"{100 * share:.1f} % of the grid, {snr:g} dB")
+    return ZooPlant(name, plant, what, model="linear" if pid else "nonlinear", snr_db=snr)
+
+
+def _held_out_draw(rng: np.random.Generator, name: str):
+    """One draw of a held-out unit from ``rng`` (:func:`held_out`'s ranges) and up to 200 draws of its
+    (Kp, Ti); None when none of them gives a stable loop with max abs S in :data:`HELD_OUT_MAX_S`."""
     u = rng.uniform
     tc = float(rng.choice(_HELD_OUT_TC_S))
     method = str(rng.choice(["forward", "backward", "tustin"]))
@@ -205,7 +232,6 @@ def held_out(k: int) -> ZooPlant:
               rated_mw=rated, other_mw=round(rated * (1.0 - share) / share, -1),
               Tg=round(float(u(0.1, 0.4)), 2))
     snr = round(float(u(6.0, 20.0)), 1)
-    name = f"{HELD_OUT_PREFIX}{k}"
     from fcrlive.sim import linear as lin
 
     for _ in range(200):
@@ -220,16 +246,8 @@ def held_out(k: int) -> ZooPlant:
         except (ValueError, np.linalg.LinAlgError):
             continue
         if HELD_OUT_MAX_S[0] <= ms <= HELD_OUT_MAX_S[1]:
-            break
-    else:  # pragma: no cover - the ranges above give a stable governor within a few draws
-        raise ConfigError(f"held-out plant {k}: no governor with max abs S in {HELD_OUT_MAX_S} drawn")
-    g = plant.unit.governor
-    what = (f"held out: {'PID' if pid else 'PI'} ({method}) at {1 / tc:g} Hz, Kp {g.Kp:g}, Ti {g.Ti:g} s"
-            f"{f', Td {td:g} s' if pid else ''}, droop {100 * g.droop:g} % "
-            f"{'in the integral channel' if placement == 'integral' else f'around the controller ({signal})'}"
-            f", H {kw['H']:g} s, Kd {kd:g}, Tw {kw['Tw']:g} s, At {kw['At']:g}, {rated:g} MW at "
-            f"{100 * share:.1f} % of the grid, {snr:g} dB")
-    return ZooPlant(name, plant, what, model="linear" if pid else "nonlinear", snr_db=snr)
+            return plant, kw, pid, share, snr
+    return None
 
 
 def zoo_logger(name: str) -> Logger:
