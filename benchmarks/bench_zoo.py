@@ -111,7 +111,8 @@ def _fit(task: Task, logger: str, sig, tr, method: str, with_plant: bool, with_h
                     "max_g1": [_entry(None, None, tr.max_g1)],
                     "gp": [_entry(None, None, abs(v)) | {"period_s": p} for p, v in tr.gp]}
         return row
-    row.update(status="ok", method=getattr(rep, "method", None), seconds=time.perf_counter() - t0)
+    row.update(status="ok", method=getattr(rep, "method", None), seconds=time.perf_counter() - t0,
+               notes=list(getattr(rep, "notes", ()) or ()))
     q = {}
     d = getattr(rep, "droop", None)
     q["droop"] = [_entry(getattr(d, "value", None), getattr(d, "ci95", None), tr.droop)
