@@ -581,9 +581,11 @@ held (and the rest polished) was a coin toss: a jackknife refit of held-out-4 (K
 (max|S|'s interval [1.01, 1.71] vs [0.89, 1.82]). With the Gauss-Newton step by SVD (:func:`_gn_step`) and
 1e-4, the zoo's seven plants and held-out-0 … 11 (excited, ideal and 0.1 % meter noise, 15/30 min, seeds
 0-2; 228 logs, 8892 numbers), SkylakeX vs Haswell: 2 numbers more than 1e-4 apart (4e-4), none more than
-1 %, none shown under one kernel only (session 19, normal equations and 1e-6: 80 more than 1e-4, 45 more
-than 1 %, 14 shown under one kernel only). Before the SVD step, 1e-5 had not helped (the zoo's G, 0.1 %,
-30 min, seed 3: a jackknife refit stalled over a zero next to the root, held or not)."""
+1 %, none shown under one kernel only (normal equations and 1e-6: 80 more than 1e-4, 45 more than 1 %,
+42 shown under one kernel only). Haswell vs Sandybridge: 33 / 12 / 0 → 3 / 2 / 27, the 27 on one log
+(held-out-9, 15 min, seed 0: a start that finds a lower basin under one rounding only). Before the SVD
+step, 1e-5 had not helped (the zoo's G, 0.1 %, 30 min, seed 3: a jackknife refit stalled over a zero next
+to the root, held or not)."""
 _GUARD_HOLD = _ROOT_MAX * (1.0 - 1e-8)
 """Where :func:`_polish_on_guard` holds a pinned root: just inside the guard, so every point it tries is
 stable by :func:`_stable`'s test. Not at the root's own place: on the zoo's G (0.1 % meter noise, 30 min,
