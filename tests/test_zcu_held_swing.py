@@ -109,7 +109,6 @@ def test_the_same_log_gives_the_same_numbers_under_two_blas_kernels(tmp_path):
     assert shown >= 30  # G's peaks and G_p points as well
 
 
-
 def _same_numbers(a: dict, b: dict) -> int:
     """Asserts that two children's rows agree (shown under both, to 1e-4); the count of shown numbers."""
     shown = 0
@@ -143,6 +142,7 @@ def test_held_out_logs_give_the_same_numbers_under_avx512_and_avx2_kernels(tmp_p
     b = _identify_under("Haswell", path)
     assert b["archs"] == ["Haswell"]
     assert _same_numbers(a, b) >= 20  # held-out-2's G_p points among them
+
 
 def test_a_turbine_path_that_follows_the_meter_noise_withholds_g_p():
     """B at 0.1 % meter noise, 15 min, seed 7: the held fit's servo × turbine path takes a pole far slower

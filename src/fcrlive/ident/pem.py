@@ -486,7 +486,8 @@ def _gn_step(J: np.ndarray, eps: np.ndarray) -> np.ndarray:
     kernel; the searches followed it into different basins. Measured on 13 excited 15-min logs at 0.1 %
     meter noise (held-out-2, -4, -6, -9, seeds 0-2; E, seed 0), SkylakeX vs Haswell: numbers more than
     1e-4 apart 52 → 24 of 507, shown under one kernel only 42 → 3 (the rest: :data:`GUARD_PINNED`). The
-    SVD costs about what the normal equations did next to the residuals' filtering.
+    SVD costs 5-10× the normal equations' solve: Z_cu +11 %, Z_ur +27 % CPU on `./dev bench identify`'s
+    window (docs/identify.md, session 20).
     """
     scale = np.sqrt(np.einsum("ij,ij->j", J, J))
     scale[scale == 0] = 1.0
