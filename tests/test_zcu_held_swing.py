@@ -97,16 +97,9 @@ def test_the_same_log_gives_the_same_numbers_under_two_blas_kernels(tmp_path):
     if a["archs"] != ["Haswell"] or b["archs"] != ["Sandybridge"]:
         pytest.skip(f"this machine's OpenBLAS did not take both kernels: {a['archs']} / {b['archs']}")
     assert len(a["rows"]) == 3
-    shown = 0
-    for ra, rb in zip(a["rows"], b["rows"]):
-        fa, fb = _flat(ra), _flat(rb)
-        assert [x is None for x in fa] == [x is None for x in fb]  # shown under both or withheld under both
-        assert sum(x is not None for x in fa) >= 3  # the droop and its interval at least
-        shown += sum(x is not None for x in fa)
-        for x, y in zip(fa, fb):
-            if x is not None:
-                assert y == pytest.approx(x, rel=1e-4)
-    assert shown >= 30  # G's peaks and G_p points as well
+    for ra in a["rows"]:
+        assert sum(x is not None for x in _flat(ra)) >= 3  # the droop and its interval at least
+    assert _same_numbers(a, b) >= 30  # G's peaks and G_p points as well
 
 
 def _same_numbers(a: dict, b: dict) -> int:
