@@ -440,13 +440,20 @@ _potrf, _potrs = sla.lapack.dpotrf, sla.lapack.dpotrs
 _geqrf, _orgqr, _trtri = sla.lapack.dgeqrf, sla.lapack.dorgqr, sla.lapack.dtrtri
 
 
+def _column_scale(X: np.ndarray) -> np.ndarray:
+    """The Euclidean norms of X's columns, 1 for a zero column: the scaling of every least-squares solve
+    and factorisation here (equilibrated columns; a zero column is left as it is)."""
+    scale = np.sqrt(np.einsum("ij,ij->j", X, X))
+    scale[scale == 0] = 1.0
+    return scale
+
+
 def _ls(X: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Least squares by column-scaled normal equations (fast; used for initial values and GN directions).
 
     Falls back to an SVD solution when the scaled Gram matrix is not numerically positive definite.
     """
-    scale = np.sqrt(np.einsum("ij,ij->j", X, X))
-    scale[scale == 0] = 1.0
+    scale = _column_scale(X)
     G = (X.T @ X) / np.outer(scale, scale)
     g = (X.T @ y) / scale
     # LAPACK's Cholesky directly, with the arguments cho_factor/cho_solve(check_finite=False) pass it (the
@@ -489,8 +496,7 @@ def _gn_step(J: np.ndarray, eps: np.ndarray) -> np.ndarray:
     SVD costs 5-10× the normal equations' solve: Z_cu +11 %, Z_ur +27 % CPU on `./dev bench identify`'s
     window (docs/identify.md, session 20).
     """
-    scale = np.sqrt(np.einsum("ij,ij->j", J, J))
-    scale[scale == 0] = 1.0
+    scale = _column_scale(J)
     return np.linalg.lstsq(J / scale, -eps, rcond=None)[0] / scale
 
 
@@ -1272,8 +1278,7 @@ def _cov_factor(J: np.ndarray) -> np.ndarray:
     predictor, and hence every transfer function of the model, does not change, so the pseudo-inverse on
     the identifiable subspace gives the right variance of the responses; as a factor it is PSD exactly.
     """
-    scale = np.sqrt(np.einsum("ij,ij->j", J, J))
-    scale[scale == 0] = 1.0
+    scale = _column_scale(J)
     R = np.linalg.qr(J / scale, mode="r")
     _, sv, Vt = np.linalg.svd(R)
     keep = sv > RANK_RTOL * sv[0] if sv.size else sv.astype(bool)
@@ -1378,8 +1383,7 @@ def _sandwich(J: np.ndarray, eps: np.ndarray, bounds) -> np.ndarray:
     by 1e-4 to 9e-2 relative vs an extended-precision reference; now ≤ 3e-10).
     """
     M = _hac_lag(eps, bounds)
-    scale = np.sqrt(np.einsum("ij,ij->j", J, J))
-    scale[scale == 0] = 1.0
+    scale = _column_scale(J)
     # economic QR (more samples than parameters: _pem checks it), by LAPACK as in _IcProjection
     qr, tau, _, _ = _geqrf(J / scale, overwrite_a=1)
     R = np.triu(qr[:J.shape[1]])
