@@ -90,7 +90,8 @@ def _reason(q) -> str | None:
     return None
 
 
-def _fit(task: Task, logger: str, sig, tr, method: str, with_plant: bool, with_h: bool = True) -> dict:
+def _fit(task: Task, logger: str, sig, tr, method: str, with_plant: bool, with_h: bool = True,
+         known_chain: bool = False) -> dict:
     from fcrlive.analysis.identify import identify_signals
     from fcrlive.sim import zoo
 
@@ -101,6 +102,11 @@ def _fit(task: Task, logger: str, sig, tr, method: str, with_plant: bool, with_h
         kw["h"] = tr.H
     if with_plant:
         kw["plant"] = zoo.zoo_plant(task.plant).plant
+    lgr = zoo.zoo_logger(logger)
+    if known_chain and (lgr.power_lag_s or lgr.power_delay_s):
+        from fcrlive.signals import PowerChain
+
+        kw["power_chain"] = PowerChain(lgr.power_lag_s, lgr.power_delay_s)
     t0 = time.perf_counter()
     try:
         rep = identify_signals(sig, **kw)
@@ -134,7 +140,8 @@ def _fit(task: Task, logger: str, sig, tr, method: str, with_plant: bool, with_h
     return row
 
 
-def run_task(task: Task, method: str = "auto", with_plant: bool = False, with_h: bool = True) -> list[dict]:
+def run_task(task: Task, method: str = "auto", with_plant: bool = False, with_h: bool = True,
+             known_chain: bool = False) -> list[dict]:
     """Simulate one record, read it through each logger, identify: one row per logger."""
     from fcrlive.sim import logger as lg
     from fcrlive.sim import zoo
@@ -146,14 +153,14 @@ def run_task(task: Task, method: str = "auto", with_plant: bool = False, with_h:
     rows = []
     for name in task.loggers:
         sig = lg.signals(res, zoo.zoo_logger(name), seed=zoo.logger_seed(task.seed, name))
-        rows.append(_fit(task, name, sig, tr, method, with_plant, with_h))
+        rows.append(_fit(task, name, sig, tr, method, with_plant, with_h, known_chain))
     return rows
 
 
 def _worker(args) -> list[dict]:
-    task, method, with_plant, with_h = args
+    task, method, with_plant, with_h, known_chain = args
     try:
-        return run_task(task, method, with_plant, with_h)
+        return run_task(task, method, with_plant, with_h, known_chain)
     except Exception:
         tb = traceback.format_exc().strip().splitlines()
         return [{"plant": task.plant, "logger": lgr, "minutes": task.minutes, "excitation": task.excitation,
@@ -301,6 +308,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--with-plant", action="store_true", help="give identify_signals the plant description")
     ap.add_argument("--no-h", action="store_true", help="do not give identify_signals H (the data sheet's "
                     "inertia constant)")
+    ap.add_argument("--known-chain", action="store_true", help="give identify_signals the logger's power "
+                    "transducer (lag and dead time) as the plant owner's data sheet would (PowerChain)")
     ap.add_argument("--out", type=Path, metavar="FILE.md", help="also write the table here")
     ap.add_argument("--rows", type=Path, metavar="FILE.json", help="write every fit's numbers here")
     ap.add_argument("--list", action="store_true", help="list the zoo's plants and loggers and exit")
@@ -341,7 +350,7 @@ def main(argv: list[str] | None = None) -> None:
             bar = None
     rows: list[dict] = []
     t0 = time.perf_counter()
-    args = [(t, a.method, a.with_plant, not a.no_h) for t in tasks]
+    args = [(t, a.method, a.with_plant, not a.no_h, a.known_chain) for t in tasks]
     try:
         if a.workers <= 1:
             for x in args:

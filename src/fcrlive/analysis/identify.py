@@ -37,7 +37,7 @@ from fcrlive.analysis.report import IdentifyReport, build_report
 from fcrlive.blas import single_threaded
 from fcrlive.constants import F0_HZ
 from fcrlive.errors import DataError, UserError
-from fcrlive.signals import PlantSignals, excitation_detected
+from fcrlive.signals import PlantSignals, PowerChain, excitation_detected
 
 METHODS = ("auto", "zu", "zur", "zcu", "sine", "lowband")
 
@@ -129,11 +129,12 @@ def identify_signals(
     t_fme_s: float | None = None,
     peak_min_period_s: float = PEAK_MIN_PERIOD_S,
     h: float | None = None,
+    power_chain: PowerChain | None = None,
 ) -> IdentifyReport:
     """Identify and assess; returns the report (see :func:`identify_full` for the objects behind it)."""
     return identify_full(
         signals, rated_mw=rated_mw, f0=f0, kd=kd, plant=plant, method=method, ts_id=ts_id, t_fme_s=t_fme_s,
-        peak_min_period_s=peak_min_period_s, h=h,
+        peak_min_period_s=peak_min_period_s, h=h, power_chain=power_chain,
     ).report
 
 
@@ -154,18 +155,23 @@ def identify_full(
     t_fme_s: float | None = None,
     peak_min_period_s: float = PEAK_MIN_PERIOD_S,
     h: float | None = None,
+    power_chain: PowerChain | None = None,
 ) -> Identification:
     """The pipeline (module docstring). ``plant``: an fcrlive Plant; its controller is used for Z_cu and
     its droop for the sine-test normalisation. ``peak_min_period_s``: shortest period of the band in which
     max|G_1| and max|S| are searched (analysis.assess.peak_band). Raises DataError/UserError with
-    one-line messages.
+    one-line messages. ``power_chain``: how the logged power lags the other columns (a transducer's lag
+    and dead time, :class:`fcrlive.signals.PowerChain`); Z_cu with H takes it off u before it forms
+    w = y + G_J u. The other methods do not use it: they fit u as an input, where the restored power's
+    raised meter noise is errors in variables, and their droop rests on periods of minutes, where a
+    sub-second chain does not show.
 
     Every report passes :func:`fcrlive.analysis.quality.withhold`: a quantity whose 95 % interval is
     missing, of zero width or wider than its value, and every quantity of a Z_ur search that did not
     converge, is null with the reason (``not_identifiable``), for the CLI, the daemon and prequal alike."""
     res = _identify(
         signals, rated_mw=rated_mw, f0=f0, kd=kd, plant=plant, method=method, ts_id=ts_id, t_fme_s=t_fme_s,
-        peak_min_period_s=peak_min_period_s, h=h,
+        peak_min_period_s=peak_min_period_s, h=h, power_chain=power_chain,
     )
     ni, note = _not_identifiable(res, kd=kd, t_fme_s=t_fme_s, peak_min_period_s=peak_min_period_s)
     rep = res.report
@@ -267,6 +273,7 @@ def _identify(
     t_fme_s: float | None,
     peak_min_period_s: float,
     h: float | None,
+    power_chain: PowerChain | None = None,
 ) -> Identification:
     """:func:`identify_full` before the quality rules."""
     sigs = [signals] if isinstance(signals, PlantSignals) else list(signals)
@@ -305,6 +312,7 @@ def _identify(
         return Identification(rep, a, exp)
     sig = merge_signals(sigs)
     ts_default = ex.DEFAULT_TS_ID if ts_id is None else ts_id
+    chain = power_chain if power_chain is not None and power_chain.active else None
     if method == "lowband":
         # the excitation in ε is the governor's own only on a log at its controller rate (lowband.lowband)
         at_rate = plant is not None and sig.Ts <= 1.5 * plant.unit.governor.Tc
@@ -324,7 +332,7 @@ def _identify(
             # meter noise, and its peaks with it, with intervals that excluded the truth.
             if H is not None:
                 exp = ex.zcu_swing(sig, H=float(H), kd=kd, controller=controller,
-                                   ts_id=ex.ZCU_TS_ID if ts_id is None else ts_id)
+                                   ts_id=ex.ZCU_TS_ID if ts_id is None else ts_id, power_chain=chain)
             else:
                 exp = ex.zcu(sig, controller=controller, ts_id=ts_default, kd=kd)
         except ControllerFitError as exc:

@@ -60,6 +60,21 @@ def configure(p: argparse.ArgumentParser) -> None:
         metavar="T_FME",
         help="multiply F by 1/(T_FME s + 1) (test signal generated inside the controller)",
     )
+    p.add_argument(
+        "--power-lag-s",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="time constant of the power transducer's first-order lag [s] (data sheet; default 0): Z_cu with "
+        "--h takes it off InsAcPow before it uses the swing equation",
+    )
+    p.add_argument(
+        "--power-delay-s",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="dead time of the power measurement against the frequency columns [s] (default 0)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
     p.add_argument("--plot", type=Path, metavar="DIR", help="write Bode, Nyquist and Req. 9 plots here")
 
@@ -82,6 +97,8 @@ def run(args: argparse.Namespace) -> int:
 
         plant = load_plant(args.plant)
     signals = read_signals(args.files, args.rated_mw, args.f0)
+    from fcrlive.signals import PowerChain
+
     try:
         res = identify_full(
             signals,
@@ -93,6 +110,7 @@ def run(args: argparse.Namespace) -> int:
             ts_id=args.ts_id,
             t_fme_s=args.fme,
             h=args.h,
+            power_chain=PowerChain(args.power_lag_s, args.power_delay_s),
         )
     except UserError as exc:
         raise identification_error(exc, args.files) from None
@@ -131,6 +149,9 @@ def _check_options(args: argparse.Namespace) -> None:
         raise UserError(f"--kd must be a finite number [pu], got {args.kd:g}", where="--kd")
     if args.h is not None and not (math.isfinite(args.h) and args.h > 0):
         raise UserError(f"--h must be a positive finite number [s], got {args.h:g}", where="--h")
+    for opt, value in (("--power-lag-s", args.power_lag_s), ("--power-delay-s", args.power_delay_s)):
+        if not (math.isfinite(value) and 0 <= value <= 5.0):
+            raise UserError(f"{opt} must be a number of seconds in [0, 5], got {value:g}", where=opt)
     if args.plot is not None:
         _check_plot_dir(args.plot)
 

@@ -75,13 +75,17 @@ def _configure_zoo(p: argparse.ArgumentParser) -> None:
                    help="meter noise on each logged value (log) or at the controller rate (meter)")
     g.add_argument("--freq-resolution-mhz", type=float, metavar="MHZ", help="GridFreq resolution [mHz]")
     g.add_argument("--jitter-ms", type=float, metavar="MS", help="sampling jitter, uniform in ±MS [ms]")
+    g.add_argument("--power-lag-s", type=float, metavar="S",
+                   help="time constant of the power transducer's first-order lag [s]")
+    g.add_argument("--power-delay-s", type=float, metavar="S", help="dead time of the power measurement [s]")
     g.add_argument("--columns", choices=["tso", "governor"],
                    help="tso: GridFreq/ApplFreqSig/InsAcPow; governor: also ContOutSig/GuideVane")
 
 
 _LOGGER_OPTIONS = {"log_every": "every", "block_average": "block_s", "meter_noise_pct": "meter_noise_pct",
                    "noise_at": "noise_at", "freq_resolution_mhz": "freq_resolution_mhz",
-                   "jitter_ms": "jitter_ms", "columns": "columns"}
+                   "jitter_ms": "jitter_ms", "power_lag_s": "power_lag_s", "power_delay_s": "power_delay_s",
+                   "columns": "columns"}
 
 
 def _logger(args: argparse.Namespace):

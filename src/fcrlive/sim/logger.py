@@ -7,6 +7,11 @@ Everything random comes from ``seed`` (independent of the simulation's own strea
 
 What a logger does, in this order:
 
+0. **Power transducer dynamics** (``power_lag_s``, ``power_delay_s``): the power the meter reports is the
+   generator's electrical power through a first-order lag (a transducer's response; IEC 60688 transducers
+   answer within 0.1-0.4 s) and a dead time (a meter's averaging window, or a power column stamped by
+   another device than the frequency columns), applied at the controller rate. Only InsAcPow: the
+   frequency columns and the governor's own columns come from the governor.
 1. **Power meter noise** (``meter_noise_pct``, % of rated power, white). ``noise_at="log"`` (default):
    on each logged InsAcPow value, so the whole variance lands below the log's Nyquist frequency (the
    harsh case for a slow log, and what a column of a real log shows); ``"meter"``: white at the
@@ -41,7 +46,7 @@ from typing import Literal
 import numpy as np
 
 from fcrlive.errors import ConfigError
-from fcrlive.signals import PlantSignals
+from fcrlive.signals import PlantSignals, transducer
 from fcrlive.tso.csvlog import TsoLog
 from fcrlive.tso.signals import DEFAULT_START, plant_signals
 
@@ -77,6 +82,10 @@ class Logger:
     """Std of white frequency meter noise on GridFreq [mHz]."""
     jitter_ms: float = 0.0
     """Sampling-instant jitter, uniform in ±jitter_ms [ms] (instantaneous samples only)."""
+    power_lag_s: float = 0.0
+    """Time constant of the power transducer's first-order lag [s]; 0: none."""
+    power_delay_s: float = 0.0
+    """Dead time of the power measurement [s], rounded to whole controller samples; 0: none."""
     columns: Columns = "tso"
     round_columns: bool = True
     description: str = ""
@@ -91,7 +100,8 @@ class Logger:
             raise ConfigError(f"logger {self.name}: block averages and every > 1 exclude each other")
         if self.block_s is not None and self.jitter_ms:
             raise ConfigError(f"logger {self.name}: jitter applies to instantaneous samples only")
-        for f in ("meter_noise_pct", "freq_resolution_mhz", "freq_noise_mhz", "jitter_ms"):
+        for f in ("meter_noise_pct", "freq_resolution_mhz", "freq_noise_mhz", "jitter_ms", "power_lag_s",
+                  "power_delay_s"):
             v = getattr(self, f)
             if not (v >= 0 and math.isfinite(v)):
                 raise ConfigError(f"logger {self.name}: {f} must be >= 0, got {v}")
@@ -116,6 +126,8 @@ class Logger:
             how = ("instantaneous at the controller rate" if self.every == 1
                    else f"instantaneous, 1/{self.every} of the controller rate")
         parts = [how, f"power noise {self.meter_noise_pct:g} % of rated ({self.noise_at})"]
+        if self.power_lag_s or self.power_delay_s:
+            parts.append(f"power transducer lag {self.power_lag_s:g} s, dead time {self.power_delay_s:g} s")
         if self.freq_resolution_mhz:
             parts.append(f"frequency resolution {self.freq_resolution_mhz:g} mHz")
         if self.freq_noise_mhz:
@@ -147,7 +159,7 @@ def log(result, logger: Logger, *, seed: int = 0, start: datetime = DEFAULT_STAR
     t = np.asarray(result.t, dtype=float)
     N = len(t)
     g_pow, g_freq, g_jit, _ = _rng(seed)
-    p = np.asarray(result.pe_mw, dtype=float).copy()
+    p = transducer(np.asarray(result.pe_mw, dtype=float), Tc, logger.power_lag_s, logger.power_delay_s)
     noise_std_mw = logger.meter_noise_pct / 100.0 * rated
     if noise_std_mw > 0 and logger.noise_at == "meter":
         p += noise_std_mw * g_pow.standard_normal(N)
