@@ -1175,6 +1175,11 @@ def zcu_swing(
              "y + G_J u"]
     if signals is not raw:
         notes.append(f"power restored through the {power_chain.describe()} before w = y + G_J u")
+    else:
+        # the data cannot yet tell a slow chain reliably (docs/zoo.md): say what is assumed
+        notes.append("InsAcPow taken as aligned with the frequency columns (no power transducer lag or dead "
+                     "time given): a 0.2 s lag moves max|S| and max|G_1| by about +3 %, 0.5 s with 0.2 s "
+                     "of dead time by +9 … +17 % (--power-lag-s, --power-delay-s)")
     if controller is None:
         controller = identify_controller(raw)
         notes.append(
