@@ -100,3 +100,26 @@ def test_identify_refuses_a_negative_power_lag_in_one_line(tmp_path, capsys):
     assert rc == 2
     assert "--power-lag-s" in err and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_the_daemon_plug_in_passes_the_configured_chain(record, tmp_path):
+    """The daemon's window of a governor whose power point lags: the plug-in with the unit's power_lag_s
+    and power_delay_s answers as identify_signals with the chain given."""
+    from fcrlive.daemon.identify_plugin import identify_window
+    from fcrlive.plant.description import plant_to_toml
+
+    zp = zoo.zoo_plant("A-classic-tustin-20Hz")
+    toml = tmp_path / "a.toml"
+    toml.write_text(plant_to_toml(zp.plant))
+    p = transducer(record.pe_mw, record.Tc, 0.5, 0.2)
+    n = len(record.t)
+    window = {"t": np.asarray(record.t, float), "ok": np.ones(n), "power": p,
+              "grid_freq": record.f0 * (1.0 + np.asarray(record.y)),
+              "excitation_applied": record.f0 * np.asarray(record.r),
+              "controller_output": 100.0 * np.asarray(record.c), "guide_vane": 100.0 * np.asarray(record.a)}
+    kw = dict(rated_mw=record.rated_mw, f0=record.f0, plant=str(toml), kd=zoo.truth(zp.name).kd)
+    given = identify_window(window, power_lag_s=0.5, power_delay_s=0.2, **kw)
+    logged = identify_window(window, **kw)
+    assert given.method == "zcu" and any("power restored" in x for x in given.notes)
+    assert not any("power restored" in x for x in logged.notes)
+    assert given.max_abs_g1.value != pytest.approx(logged.max_abs_g1.value, rel=0.05)

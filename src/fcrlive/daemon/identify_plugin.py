@@ -135,14 +135,18 @@ def window_to_plant_signals(signals: dict[str, np.ndarray], rated_mw: float, f0:
 
 def identify_window(signals: dict[str, np.ndarray], rated_mw: float, f0: float = 50.0,
                     plant: str | None = None, method: str = "auto", kd: float = 0.0,
+                    power_lag_s: float = 0.0, power_delay_s: float = 0.0,
                     **_params: Any) -> IdentifyReport:
     """The plug-in: identify the window and return the report, with how the window became signals at
     the head of its ``notes``.
 
     ``plant`` is the path of a plant description file (its controller is used by ``zcu``) or None.
-    Extra keyword parameters from newer daemons are accepted and ignored.
+    ``power_lag_s``, ``power_delay_s``: the power transducer's lag and dead time [s]
+    (:class:`fcrlive.signals.PowerChain`). Extra keyword parameters from newer daemons are accepted and
+    ignored.
     """
     from fcrlive.analysis.identify import identify_signals
+    from fcrlive.signals import PowerChain
 
     ps = window_to_plant_signals(signals, rated_mw, f0)
     plant_obj = None
@@ -150,5 +154,6 @@ def identify_window(signals: dict[str, np.ndarray], rated_mw: float, f0: float =
         from fcrlive.plant.description import load_plant
 
         plant_obj = load_plant(plant)
-    rep = identify_signals(ps, rated_mw=rated_mw, f0=f0, kd=kd, plant=plant_obj, method=method)
+    rep = identify_signals(ps, rated_mw=rated_mw, f0=f0, kd=kd, plant=plant_obj, method=method,
+                           power_chain=PowerChain(power_lag_s, power_delay_s))
     return rep.model_copy(update={"notes": [*ps.notes, *rep.notes]})

@@ -158,6 +158,12 @@ class Service:
                      payload.samples, payload.rate_hz, payload.quality["ok"], payload.quality["comm_error"],
                      payload.missed_ticks, self.writer.committed)
 
+    def _power_chain(self) -> dict[str, float]:
+        """The power transducer's figures for the plug-in, only where configured (a plug-in written before
+        them need not take them)."""
+        u = self.cfg.unit
+        return {k: v for k, v in (("power_lag_s", u.power_lag_s), ("power_delay_s", u.power_delay_s)) if v}
+
     def _on_written(self, w) -> None:
         self.written_hz = float("nan") if w.written_hz is None else float(w.written_hz)
 
@@ -234,7 +240,8 @@ class Service:
             t0 = time.monotonic()
             try:
                 result, _ = await worker.run(window_signals(w), self.cfg.unit.rated_mw, self.cfg.unit.f0,
-                                             plant=plant, method=ic.method, kd=self.cfg.unit.kd)
+                                             plant=plant, method=ic.method, kd=self.cfg.unit.kd,
+                                             **self._power_chain())
                 self.metrics.ident_runs.labels("ok").inc()
             except Exception as exc:  # the plug-in's failure is data for the user, not a daemon crash
                 error = f"{type(exc).__name__}: {exc}"

@@ -74,6 +74,10 @@ class UnitConfig(_Section):
     f0: float = Field(50.0, ge=45, le=65, description="nominal frequency [Hz]")
     kd: float = Field(0.0, ge=0, le=10, description="load damping of the swing equation [pu]")
     plant: ConfigPath | None = Field(None, description="optional plant description file")
+    power_lag_s: float = Field(0.0, ge=0, le=5, description="time constant of the power transducer's "
+                               "first-order lag [s] (its data sheet); Z_cu with H takes it off the power")
+    power_delay_s: float = Field(0.0, ge=0, le=5, description="dead time of the power measurement against "
+                                 "the frequency [s]")
 
 
 class ModbusConfig(_Section):
