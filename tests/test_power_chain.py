@@ -123,3 +123,13 @@ def test_the_daemon_plug_in_passes_the_configured_chain(record, tmp_path):
     assert given.method == "zcu" and any("power restored" in x for x in given.notes)
     assert not any("power restored" in x for x in logged.notes)
     assert given.max_abs_g1.value != pytest.approx(logged.max_abs_g1.value, rel=0.05)
+
+
+def test_a_chain_the_method_does_not_use_is_said_so(record):
+    tr = zoo.truth("A-classic-tustin-20Hz")
+    s = lg.signals(record, zoo.zoo_logger("ctl-ideal"), seed=1)
+    rep = identify_signals(s, rated_mw=tr.rated_mw, kd=tr.kd, h=tr.H, method="lowband",
+                           power_chain=PowerChain(0.3, 0.0))
+    assert any("given but not used" in n for n in rep.notes)
+    assert not any("given but not used" in n for n in identify_signals(
+        s, rated_mw=tr.rated_mw, kd=tr.kd, h=tr.H, method="lowband").notes)

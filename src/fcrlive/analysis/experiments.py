@@ -1179,7 +1179,8 @@ def zcu_swing(
         # the data cannot yet tell a slow chain reliably (docs/zoo.md): say what is assumed
         notes.append("InsAcPow taken as aligned with the frequency columns (no power transducer lag or dead "
                      "time given): a 0.2 s lag moves max|S| and max|G_1| by about +3 %, 0.5 s with 0.2 s "
-                     "of dead time by +9 … +17 % (--power-lag-s, --power-delay-s)")
+                     "of dead time by +9 … +17 % (identify --power-lag-s/--power-delay-s; the daemon's "
+                     "[unit] power_lag_s/power_delay_s)")
     if controller is None:
         controller = identify_controller(raw)
         notes.append(
