@@ -103,8 +103,8 @@ def test_identify_refuses_a_negative_power_lag_in_one_line(tmp_path, capsys):
 
 
 def test_the_daemon_plug_in_passes_the_configured_chain(record, tmp_path):
-    """The daemon's window of a governor whose power point lags: the plug-in with the unit's power_lag_s
-    and power_delay_s answers as identify_signals with the chain given."""
+    """The daemon's window of a governor whose power point lags: the plug-in given the unit's power_lag_s
+    and power_delay_s restores the power (Z_cu says so and its peaks move); without them it does not."""
     from fcrlive.daemon.identify_plugin import identify_window
     from fcrlive.plant.description import plant_to_toml
 

@@ -299,19 +299,15 @@ def transducer(x: np.ndarray, Ts: float, lag_s: float, delay_s: float) -> np.nda
     x = np.asarray(x, float)
     out = x.copy()
     if lag_s > 0 and len(x):
+        from scipy.signal import lfilter
+
         a = math.exp(-Ts / lag_s)
-        out = (1.0 - a) * _first_order(x, a)
+        # s[n] = a s[n−1] + x[n] from rest at x[0] (s[−1] = x[0]/(1 − a)), scaled to unit gain
+        out = (1.0 - a) * lfilter([1.0], [1.0, -a], x, zi=[a * x[0] / (1.0 - a)])[0]
     k = round(delay_s / Ts)
     if k > 0 and len(out):
         out = np.r_[np.full(min(k, len(out)), out[0]), out[: max(len(out) - k, 0)]]
     return out
-
-
-def _first_order(x: np.ndarray, a: float) -> np.ndarray:
-    """s[n] = a s[n−1] + x[n] from s[−1] = x[0]/(1 − a) (rest at the first value), by scipy's lfilter."""
-    from scipy.signal import lfilter
-
-    return lfilter([1.0], [1.0, -a], x, zi=[a * x[0] / (1.0 - a)])[0]
 
 
 @dataclass(frozen=True)
@@ -359,8 +355,7 @@ class PowerChain:
 
         if not self.active:
             return s
-        return replace(s, u=self.restored(s.u, float(s.Ts), s.segments),
-                       notes=(*s.notes, f"power restored through the {self.describe()}"))
+        return replace(s, u=self.restored(s.u, float(s.Ts), s.segments))
 
     def restored(self, x: np.ndarray, Ts: float, segments) -> np.ndarray:
         """``x`` (sampled every ``Ts`` [s]) taken back through the chain per gap-free segment: the exact

@@ -183,11 +183,11 @@ def identify_full(
     if note:
         rep = rep.model_copy(update={"notes": [*rep.notes, note]})
     rep = quality.withhold(rep, ni)
-    if power_chain is not None and power_chain.active and not any("power restored" in n for n in rep.notes):
+    H = _inertia(h, plant)
+    if power_chain is not None and power_chain.active and not (rep.method == "zcu" and H is not None):
         rep = rep.model_copy(update={"notes": [
             *rep.notes, f"{power_chain.describe()} given but not used: only Z_cu with H uses it (method "
             f"{rep.method})"]})
-    H = _inertia(h, plant)
     if (rep.method == "zcu" and H is not None and rep.droop is not None and rep.droop.value is None
             and not rep.method_reason.startswith("requested")):
         rep = _droop_from_lowband(rep, signals, H=H, f0=f0, kd=kd, t_fme_s=t_fme_s,
