@@ -99,3 +99,17 @@ def test_forced_zcu_without_excitation_is_one_line(files, capsys):
     rc = main(["identify", str(files["zu"]), "--rated-mw", "300", "--method", "zcu"])
     err = capsys.readouterr().err
     assert rc == 2 and len(err.strip().splitlines()) == 1
+
+
+def test_a_power_lag_alone_is_taken_off_and_none_given_is_checked(files, capsys):
+    """--power-lag-s without --power-delay-s: a lag with no dead time, taken off InsAcPow; neither: Z_cu
+    with H profiles the (aligned) log for a chain and finds none."""
+    sw = PLANT.unit.swing
+    base = ["identify", str(files["zcu"]), "--rated-mw", "300", "--h", str(sw.H), "--kd", str(sw.Kd),
+            "--json"]
+    assert main([*base, "--power-lag-s", "0.2"]) == 0
+    notes = json.loads(capsys.readouterr().out)["notes"]
+    assert any("power transducer lag 0.2 s, dead time 0 s" in n for n in notes)
+    assert main(base) == 0
+    notes = json.loads(capsys.readouterr().out)["notes"]
+    assert any("points to none" in n for n in notes)

@@ -1,5 +1,6 @@
-"""The power measurement chain: a transducer's lag and dead time on InsAcPow (the zoo's loggers), and
-Z_cu with H taking a known chain off the power (fcrlive.signals.PowerChain)."""
+"""The power measurement chain: a transducer's lag and dead time on InsAcPow (the zoo's loggers), Z_cu
+with H taking a known chain off the power (fcrlive.signals.PowerChain), and its check for one nobody gave
+(fcrlive.analysis.experiments.power_chain_profile)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from fcrlive.analysis.experiments import power_chain_profile
 from fcrlive.analysis.identify import identify_signals
 from fcrlive.cli import main
 from fcrlive.errors import ConfigError
@@ -88,8 +90,43 @@ def test_zcu_with_the_chain_given_answers_as_on_the_aligned_log(record):
         assert b.ci95[0] == pytest.approx(a.ci95[0], rel=2e-2)
         assert b.ci95[1] == pytest.approx(a.ci95[1], rel=2e-2)
         assert abs(c.value / a.value - 1) > 0.1
+        # not given, the profile finds the chain: the value stays the logged power's, its interval holds it
+        assert c.ci95[0] < a.value < c.ci95[1]
+        assert c.ci95[1] - c.ci95[0] > 2.0 * abs(c.value - a.value)
     assert given.droop.value == pytest.approx(ref.droop.value, rel=1e-3)
     assert any("power restored" in n for n in given.notes)
+    assert any("restored through a power transducer lag 0.5 s, dead time 0.2 s" in n for n in logged.notes)
+    assert any("points to none" in n for n in ref.notes)
+
+
+@pytest.mark.parametrize(("lag", "delay", "lags"), [(0.5, 0.2, (0.5,)), (0.3, 0.0, (0.2, 0.35)),
+                                                     (0.0, 0.1, (0.0,)), (0.0, 0.0, (0.0,))])
+def test_the_profile_finds_a_chain_on_the_log_and_none_on_the_aligned_log(record, lag, delay, lags):
+    """The profile's grid holds 0.2 and 0.35 s, not 0.3 s: it names a neighbour; on the aligned log
+    nothing beats (0, 0)."""
+    tr = zoo.truth("A-classic-tustin-20Hz")
+    ideal = zoo.zoo_logger("ctl-ideal")
+    s = lg.signals(record, replace(ideal, name="x", power_lag_s=lag, power_delay_s=delay), seed=1)
+    p = power_chain_profile(s, tr.H, tr.kd)
+    assert p.best.lag_s in lags
+    assert p.best.delay_s == pytest.approx(delay, abs=1e-9)
+    assert p.found == (lag > 0 or delay > 0)
+    assert not p.at_edge
+    if not p.found:
+        assert p.lr == 0.0
+
+
+def test_an_aligned_power_given_skips_the_profile_and_changes_nothing_else(record):
+    tr = zoo.truth("A-classic-tustin-20Hz")
+    s = lg.signals(record, zoo.zoo_logger("ctl-ideal"), seed=1)
+    kw = dict(rated_mw=tr.rated_mw, kd=tr.kd, h=tr.H)
+    given = identify_signals(s, power_chain=PowerChain(), **kw)
+    checked = identify_signals(s, **kw)
+    assert any("aligned with the frequency columns, as given" in n for n in given.notes)
+    assert not any("profile" in n for n in given.notes)
+    for key in ("max_abs_s", "max_abs_g1", "droop"):
+        assert getattr(given, key).value == getattr(checked, key).value
+        assert getattr(given, key).ci95 == getattr(checked, key).ci95
 
 
 def test_identify_refuses_a_negative_power_lag_in_one_line(tmp_path, capsys):
@@ -122,6 +159,8 @@ def test_the_daemon_plug_in_passes_the_configured_chain(record, tmp_path):
     logged = identify_window(window, **kw)
     assert given.method == "zcu" and any("power restored" in x for x in given.notes)
     assert not any("power restored" in x for x in logged.notes)
+    # without them the plug-in's Z_cu finds the chain itself and says so
+    assert any("InsAcPow restored through a power transducer lag 0.5 s" in x for x in logged.notes)
     assert given.max_abs_g1.value != pytest.approx(logged.max_abs_g1.value, rel=0.05)
 
 

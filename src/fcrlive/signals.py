@@ -329,7 +329,11 @@ class PowerChain:
     instead (y, c and a through the same lag, u as logged: no noise amplified, every transfer function
     between the signals unchanged) was tried and is wrong in closed loop: it smears the process noise in
     y over past samples that the controller had already answered in c, the bias the block means avoid
-    (experiments.ZCU_TS_ID): max|S| +6.5 % and +14.4 % median on the logs above, G_p +2.4/+4.1 %."""
+    (experiments.ZCU_TS_ID): max|S| +6.5 % and +14.4 % median on the logs above, G_p +2.4/+4.1 %.
+
+    Not given at all (None, as opposed to a chain of 0 and 0: a power known to be aligned), Z_cu with H
+    profiles the log for one (:func:`fcrlive.analysis.experiments.power_chain_profile`) and widens its
+    intervals by the effect of one it finds."""
 
     lag_s: float = 0.0
     delay_s: float = 0.0

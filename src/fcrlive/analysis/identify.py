@@ -316,7 +316,6 @@ def _identify(
         return Identification(rep, a, exp)
     sig = merge_signals(sigs)
     ts_default = ex.DEFAULT_TS_ID if ts_id is None else ts_id
-    chain = power_chain if power_chain is not None and power_chain.active else None
     if method == "lowband":
         # the excitation in ε is the governor's own only on a log at its controller rate (lowband.lowband)
         at_rate = plant is not None and sig.Ts <= 1.5 * plant.unit.governor.Tc
@@ -336,7 +335,7 @@ def _identify(
             # meter noise, and its peaks with it, with intervals that excluded the truth.
             if H is not None:
                 exp = ex.zcu_swing(sig, H=float(H), kd=kd, controller=controller,
-                                   ts_id=ex.ZCU_TS_ID if ts_id is None else ts_id, power_chain=chain)
+                                   ts_id=ex.ZCU_TS_ID if ts_id is None else ts_id, power_chain=power_chain)
             else:
                 exp = ex.zcu(sig, controller=controller, ts_id=ts_default, kd=kd)
         except ControllerFitError as exc:

@@ -63,17 +63,19 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--power-lag-s",
         type=float,
-        default=0.0,
+        default=None,
         metavar="S",
-        help="time constant of the power transducer's first-order lag [s] (data sheet; default 0): Z_cu with "
-        "--h takes it off InsAcPow before it uses the swing equation",
+        help="time constant of the power transducer's first-order lag [s] (data sheet): Z_cu with --h takes "
+        "it off InsAcPow before it uses the swing equation. Not given (nor --power-delay-s): Z_cu with --h "
+        "profiles the log for a chain and widens its intervals by the effect of one it finds",
     )
     p.add_argument(
         "--power-delay-s",
         type=float,
-        default=0.0,
+        default=None,
         metavar="S",
-        help="dead time of the power measurement against the frequency columns [s] (default 0)",
+        help="dead time of the power measurement against the frequency columns [s] (0 when only "
+        "--power-lag-s is given)",
     )
     p.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
     p.add_argument("--plot", type=Path, metavar="DIR", help="write Bode, Nyquist and Req. 9 plots here")
@@ -110,7 +112,8 @@ def run(args: argparse.Namespace) -> int:
             ts_id=args.ts_id,
             t_fme_s=args.fme,
             h=args.h,
-            power_chain=PowerChain(args.power_lag_s, args.power_delay_s),
+            power_chain=(None if args.power_lag_s is None and args.power_delay_s is None
+                         else PowerChain(args.power_lag_s or 0.0, args.power_delay_s or 0.0)),
         )
     except UserError as exc:
         raise identification_error(exc, args.files) from None
@@ -150,7 +153,7 @@ def _check_options(args: argparse.Namespace) -> None:
     if args.h is not None and not (math.isfinite(args.h) and args.h > 0):
         raise UserError(f"--h must be a positive finite number [s], got {args.h:g}", where="--h")
     for opt, value in (("--power-lag-s", args.power_lag_s), ("--power-delay-s", args.power_delay_s)):
-        if not (math.isfinite(value) and 0 <= value <= 5.0):
+        if value is not None and not (math.isfinite(value) and 0 <= value <= 5.0):
             raise UserError(f"{opt} must be a number of seconds in [0, 5], got {value:g}", where=opt)
     if args.plot is not None:
         _check_plot_dir(args.plot)

@@ -135,15 +135,15 @@ def window_to_plant_signals(signals: dict[str, np.ndarray], rated_mw: float, f0:
 
 def identify_window(signals: dict[str, np.ndarray], rated_mw: float, f0: float = 50.0,
                     plant: str | None = None, method: str = "auto", kd: float = 0.0,
-                    power_lag_s: float = 0.0, power_delay_s: float = 0.0,
+                    power_lag_s: float | None = None, power_delay_s: float | None = None,
                     **_params: Any) -> IdentifyReport:
     """The plug-in: identify the window and return the report, with how the window became signals at
     the head of its ``notes``.
 
     ``plant`` is the path of a plant description file (its controller is used by ``zcu``) or None.
     ``power_lag_s``, ``power_delay_s``: the power transducer's lag and dead time [s]
-    (:class:`fcrlive.signals.PowerChain`). Extra keyword parameters from newer daemons are accepted and
-    ignored.
+    (:class:`fcrlive.signals.PowerChain`; neither given: Z_cu with H checks the window for one). Extra
+    keyword parameters from newer daemons are accepted and ignored.
     """
     from fcrlive.analysis.identify import identify_signals
     from fcrlive.signals import PowerChain
@@ -155,5 +155,6 @@ def identify_window(signals: dict[str, np.ndarray], rated_mw: float, f0: float =
 
         plant_obj = load_plant(plant)
     rep = identify_signals(ps, rated_mw=rated_mw, f0=f0, kd=kd, plant=plant_obj, method=method,
-                           power_chain=PowerChain(power_lag_s, power_delay_s))
+                           power_chain=(None if power_lag_s is None and power_delay_s is None
+                                        else PowerChain(power_lag_s or 0.0, power_delay_s or 0.0)))
     return rep.model_copy(update={"notes": [*ps.notes, *rep.notes]})

@@ -162,7 +162,8 @@ class Service:
         """The power transducer's figures for the plug-in, only where configured (a plug-in written before
         them need not take them)."""
         u = self.cfg.unit
-        return {k: v for k, v in (("power_lag_s", u.power_lag_s), ("power_delay_s", u.power_delay_s)) if v}
+        return {k: v for k, v in (("power_lag_s", u.power_lag_s), ("power_delay_s", u.power_delay_s))
+                if v is not None}
 
     def _on_written(self, w) -> None:
         self.written_hz = float("nan") if w.written_hz is None else float(w.written_hz)

@@ -74,10 +74,13 @@ class UnitConfig(_Section):
     f0: float = Field(50.0, ge=45, le=65, description="nominal frequency [Hz]")
     kd: float = Field(0.0, ge=0, le=10, description="load damping of the swing equation [pu]")
     plant: ConfigPath | None = Field(None, description="optional plant description file")
-    power_lag_s: float = Field(0.0, ge=0, le=5, description="time constant of the power transducer's "
-                               "first-order lag [s] (its data sheet); Z_cu with H takes it off the power")
-    power_delay_s: float = Field(0.0, ge=0, le=5, description="dead time of the power measurement against "
-                                 "the frequency [s]")
+    power_lag_s: float | None = Field(
+        None, ge=0, le=5, description="time constant of the power transducer's first-order lag [s] (its data "
+        "sheet); Z_cu with H takes it off the power. Neither this nor power_delay_s set: Z_cu with H "
+        "profiles each window for a chain and widens its intervals by one it finds")
+    power_delay_s: float | None = Field(
+        None, ge=0, le=5, description="dead time of the power measurement against the frequency [s] (0 when "
+        "only power_lag_s is set)")
 
 
 class ModbusConfig(_Section):
