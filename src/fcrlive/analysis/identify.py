@@ -162,9 +162,11 @@ def identify_full(
     max|G_1| and max|S| are searched (analysis.assess.peak_band). Raises DataError/UserError with
     one-line messages. ``power_chain``: how the logged power lags the other columns (a transducer's lag
     and dead time, :class:`fcrlive.signals.PowerChain`); Z_cu with H takes it off u before it forms
-    w = y + G_J u. The other methods do not use it: they fit u as an input, where the restored power's
-    raised meter noise is errors in variables, and their droop rests on periods of minutes, where a
-    sub-second chain does not show.
+    w = y + G_J u, and with None (not given) profiles the log for one and widens its intervals by the
+    effect of one it finds (:func:`fcrlive.analysis.experiments.power_chain_profile`). The other
+    methods do not use it: they fit u as an input, where the restored power's raised meter noise is
+    errors in variables, and their droop rests on periods of minutes, where a sub-second chain does not
+    show.
 
     Every report passes :func:`fcrlive.analysis.quality.withhold`: a quantity whose 95 % interval is
     missing, of zero width or wider than its value, and every quantity of a Z_ur search that did not
