@@ -1451,7 +1451,8 @@ excited 30-min controller-rate logs of the zoo's seven plants (3 seeds) and twel
 (2 seeds), 156 logs besides F's: ideal and 0.1 % meter noise, (0, 0) was best, LR = 0, on every one;
 with a 0.2 s lag LR 90-2760, with 0.5 s and 0.2 s of dead time 156-3440. On F (the grid damped at the
 load bus: the logged centre-of-inertia frequency is not the unit's speed) 1030-2120 at the grid's edge
-without a chain, and 3.7-8.8 with the slow one (docs/zoo.md, "A power chain nobody gave")."""
+without a chain, and 3.7-8.8 with the slow one; held-out-30 220-430 at the edge without a chain
+(:attr:`ChainProfile.at_edge`, docs/zoo.md, "A power chain nobody gave")."""
 CHAIN_CHECK_FACTOR = 2.0
 """Where the profile finds a chain nobody gave, the 95 % half-widths of |S|, |G_1| and |G_p| gain this
 multiple of the larger distance between G_jp fitted with u as logged and the two refits with u restored
