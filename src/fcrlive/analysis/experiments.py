@@ -1502,11 +1502,7 @@ def power_chain_profile(signals: PlantSignals, H: float, kd: float, ts_id: float
     combination of block means of it shifted by whole samples: one ARX fit per candidate (0.1-0.2 s for a
     30-min log). Least squares on a fixed grid: no search whose end the rounding could move."""
     Ts = float(signals.Ts)
-    u = np.asarray(signals.u, float)
-    num, den = sps.bilinear([1.0], [2.0 * H, kd], fs=1.0 / Ts)
-    g = np.zeros_like(u)
-    for a, b in signals.segments:
-        g[a:b] = sps.lfilter(num, den, u[a:b] - u[a:b].mean())
+    g = swing_removed(replace(signals, y=np.zeros(len(signals.u))), H, kd)  # G_J u alone
     base = prepare(signals, ts_id=ts_id, names=("y", "c"), decimator="block")
     nb = max(8, round(CHAIN_PROFILE_SPAN_S / base.Ts))
     ks = sorted({round(d / Ts) for d in CHAIN_PROFILE_DELAYS_S})
